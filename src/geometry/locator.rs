@@ -1,0 +1,203 @@
+//! Point location on the fixed reference triangulation: a cube-map grid whose cells list the
+//! triangles overlapping them. Every point of the sphere lands in exactly one triangle: points on
+//! shared edges or vertices go to the triangle in which they are most inside (largest smallest
+//! barycentric weight), ties to the lowest triangle index.
+//!
+//! Plates never carry a triangulation of their own: each plate's triangles are a subset of the
+//! reference mesh in the plate's frame, so locating a point in a plate is "rotate the point into
+//! the plate frame, locate it here, check the triangle belongs to the plate". One static grid
+//! therefore serves every plate, and nothing is rebuilt at resampling.
+
+use glam::DVec3;
+
+/// Which cube face a direction falls on (0..6 = +x, −x, +y, −y, +z, −z) and its gnomonic face
+/// coordinates (u, v) in [−1, 1].
+#[inline]
+pub fn cube_face_uv(p: DVec3) -> (u8, f64, f64) {
+    let (ax, ay, az) = (p.x.abs(), p.y.abs(), p.z.abs());
+    if ax >= ay && ax >= az {
+        let f = if p.x >= 0.0 { 0 } else { 1 };
+        (f, p.y / ax, p.z / ax)
+    } else if ay >= az {
+        let f = if p.y >= 0.0 { 2 } else { 3 };
+        (f, p.x / ay, p.z / ay)
+    } else {
+        let f = if p.z >= 0.0 { 4 } else { 5 };
+        (f, p.x / az, p.y / az)
+    }
+}
+
+/// Gnomonic coordinates of `p` on face `f` (valid where `p` has a positive component along the
+/// face axis): returns (depth along the axis, u, v).
+#[inline]
+fn face_project(f: u8, p: DVec3) -> (f64, f64, f64) {
+    let (d, a, b) = match f {
+        0 => (p.x, p.y, p.z),
+        1 => (-p.x, p.y, p.z),
+        2 => (p.y, p.x, p.z),
+        3 => (-p.y, p.x, p.z),
+        4 => (p.z, p.x, p.y),
+        _ => (-p.z, p.x, p.y),
+    };
+    (d, a / d, b / d)
+}
+
+/// Equi-angular warp of a gnomonic coordinate, so grid cells have similar areas on the sphere.
+#[inline]
+fn warp(t: f64) -> f64 {
+    t.atan() * (4.0 / std::f64::consts::PI)
+}
+
+/// A located point: the triangle that contains it and its barycentric weights there (the
+/// weights of the point's central projection onto the flat triangle; they sum to 1, and are
+/// exactly (1, 0, 0) at a vertex up to rounding).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Location {
+    /// Index of the containing triangle in the reference mesh.
+    pub triangle: u32,
+    /// Barycentric weights of the triangle's three vertices.
+    pub weights: [f64; 3],
+}
+
+impl Location {
+    /// Index (0..3) of the vertex with the largest weight; ties go to the lowest index.
+    #[inline]
+    pub fn dominant_corner(&self) -> usize {
+        let w = self.weights;
+        if w[0] >= w[1] && w[0] >= w[2] {
+            0
+        } else if w[1] >= w[2] {
+            1
+        } else {
+            2
+        }
+    }
+}
+
+/// The cube-map grid over the reference triangles.
+#[derive(Clone, Debug)]
+pub struct MeshLocator {
+    grid: usize,
+    cell_start: Vec<u32>,
+    cell_triangles: Vec<u32>,
+}
+
+/// Points whose smallest normalised weight is above this are accepted as inside.
+const INSIDE_TOLERANCE: f64 = -1e-9;
+
+impl MeshLocator {
+    /// Builds the grid for `triangles` over `positions` (outward-oriented triangles, all smaller
+    /// than a few degrees, as any mesh of 1,000 samples or more is).
+    pub fn build(positions: &[DVec3], triangles: &[[u32; 3]]) -> Self {
+        let grid = (((2 * positions.len()) as f64 / 6.0).sqrt().round() as usize).clamp(1, 4096);
+        let n_cells = 6 * grid * grid;
+        let mut counts = vec![0u32; n_cells + 1];
+        let for_each_cell = |tri: &[u32; 3], f: &mut dyn FnMut(usize)| {
+            let v = [positions[tri[0] as usize], positions[tri[1] as usize], positions[tri[2] as usize]];
+            for face in 0u8..6 {
+                let p = [face_project(face, v[0]), face_project(face, v[1]), face_project(face, v[2])];
+                if p.iter().any(|&(d, _, _)| d < 0.2) {
+                    continue;
+                }
+                let umin = p[0].1.min(p[1].1).min(p[2].1);
+                let umax = p[0].1.max(p[1].1).max(p[2].1);
+                let vmin = p[0].2.min(p[1].2).min(p[2].2);
+                let vmax = p[0].2.max(p[1].2).max(p[2].2);
+                if umin > 1.0 || umax < -1.0 || vmin > 1.0 || vmax < -1.0 {
+                    continue;
+                }
+                let to_cell = |t: f64| -> usize {
+                    let s = (warp(t.clamp(-1.0, 1.0)) + 1.0) * 0.5 * grid as f64;
+                    (s.floor().max(0.0) as usize).min(grid - 1)
+                };
+                let pad = 1e-9;
+                let (i0, i1) = (to_cell(umin - pad), to_cell(umax + pad));
+                let (j0, j1) = (to_cell(vmin - pad), to_cell(vmax + pad));
+                let base = face as usize * grid * grid;
+                for j in j0..=j1 {
+                    for i in i0..=i1 {
+                        f(base + j * grid + i);
+                    }
+                }
+            }
+        };
+        for tri in triangles {
+            for_each_cell(tri, &mut |c| counts[c + 1] += 1);
+        }
+        for c in 0..n_cells {
+            counts[c + 1] += counts[c];
+        }
+        let mut fill = counts.clone();
+        let mut cell_triangles = vec![0u32; counts[n_cells] as usize];
+        for (t, tri) in triangles.iter().enumerate() {
+            for_each_cell(tri, &mut |c| {
+                cell_triangles[fill[c] as usize] = t as u32;
+                fill[c] += 1;
+            });
+        }
+        Self { grid, cell_start: counts, cell_triangles }
+    }
+
+    #[inline]
+    fn cell_of(&self, p: DVec3) -> usize {
+        let (face, u, v) = cube_face_uv(p);
+        let g = self.grid;
+        let to_cell = |t: f64| -> usize {
+            let s = (warp(t) + 1.0) * 0.5 * g as f64;
+            (s.floor().max(0.0) as usize).min(g - 1)
+        };
+        face as usize * g * g + to_cell(v) * g + to_cell(u)
+    }
+
+    /// Bytes held by the grid.
+    pub fn heap_bytes(&self) -> usize {
+        (self.cell_start.capacity() + self.cell_triangles.capacity()) * 4
+    }
+
+    /// The triangle containing unit vector `q` and its barycentric weights.
+    pub fn locate(&self, positions: &[DVec3], triangles: &[[u32; 3]], q: DVec3) -> Location {
+        let c = self.cell_of(q);
+        let range = self.cell_start[c] as usize..self.cell_start[c + 1] as usize;
+        if let Some(loc) = best_in(positions, triangles, q, self.cell_triangles[range].iter().copied()) {
+            if loc.1 >= INSIDE_TOLERANCE {
+                return loc.0;
+            }
+        }
+        // Only reachable through extreme rounding; a full scan is slow but always right.
+        best_in(positions, triangles, q, 0..triangles.len() as u32)
+            .map(|(l, _)| l)
+            .unwrap_or(Location { triangle: 0, weights: [1.0, 0.0, 0.0] })
+    }
+}
+
+/// The candidate in which `q` is most inside, with its smallest weight.
+#[inline]
+fn best_in(
+    positions: &[DVec3],
+    triangles: &[[u32; 3]],
+    q: DVec3,
+    candidates: impl Iterator<Item = u32>,
+) -> Option<(Location, f64)> {
+    let mut best: Option<(Location, f64)> = None;
+    for t in candidates {
+        let tri = triangles[t as usize];
+        let (a, b, c) = (positions[tri[0] as usize], positions[tri[1] as usize], positions[tri[2] as usize]);
+        let wa = q.dot(b.cross(c));
+        let wb = q.dot(c.cross(a));
+        let wc = q.dot(a.cross(b));
+        let s = wa + wb + wc;
+        if s <= 0.0 {
+            continue;
+        }
+        let w = [wa / s, wb / s, wc / s];
+        let m = w[0].min(w[1]).min(w[2]);
+        let better = match &best {
+            None => true,
+            Some((l, bm)) => m > *bm || (m == *bm && t < l.triangle),
+        };
+        if better {
+            best = Some((Location { triangle: t, weights: w }, m));
+        }
+    }
+    best
+}

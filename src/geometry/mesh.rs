@@ -1,0 +1,272 @@
+//! The fixed reference mesh: sample positions, their spherical Delaunay triangles, vertex
+//! adjacency, per-sample areas and the point locator. Built once per run; plates are subsets of
+//! it in their own frames, and resampling maps data back onto it.
+
+use bevy_ecs::resource::Resource;
+use glam::DVec3;
+use rayon::prelude::*;
+
+use super::delaunay::spherical_delaunay;
+use super::locator::{Location, MeshLocator};
+use super::sampling::{fibonacci_points, mean_spacing_rad};
+use super::spherical::{angle_between, spherical_triangle_area, triple};
+
+/// Smallest and largest sample counts the mesh supports.
+pub const MIN_SAMPLES: usize = 1_000;
+/// See [`MIN_SAMPLES`].
+pub const MAX_SAMPLES: usize = 4_000_000;
+
+/// Why a mesh could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum MeshError {
+    /// Sample count outside the supported range.
+    #[error("sample count {0} is out of range: allowed {MIN_SAMPLES}..={MAX_SAMPLES}")]
+    SampleCount(usize),
+    /// The triangulation failed or came out inconsistent (a bug, reported rather than hidden).
+    #[error("spherical triangulation failed: {0}")]
+    Triangulation(String),
+}
+
+/// The reference mesh (a resource). Positions are unit vectors; areas are in km².
+#[derive(Resource, Clone, Debug)]
+pub struct SphereMesh {
+    /// Unit position of each sample.
+    pub positions: Vec<DVec3>,
+    /// Triangles as sample indices, counter-clockwise seen from outside.
+    pub triangles: Vec<[u32; 3]>,
+    /// CSR offsets into `neighbors` (length = samples + 1).
+    pub neighbor_start: Vec<u32>,
+    /// Neighbouring samples along triangle edges, ascending within each sample.
+    pub neighbors: Vec<u32>,
+    /// Area represented by each sample (a third of its incident spherical triangles), km².
+    pub area_km2: Vec<f64>,
+    /// Planet radius, km.
+    pub radius_km: f64,
+    /// Longest triangle edge, radians.
+    pub max_edge_rad: f64,
+    locator: MeshLocator,
+}
+
+impl SphereMesh {
+    /// Builds an `n`-sample Fibonacci mesh (jitter as a fraction of half the spacing, drawn from
+    /// `seed`) on a sphere of radius `radius_km`.
+    pub fn fibonacci(n: usize, jitter: f64, seed: u64, radius_km: f64) -> Result<Self, MeshError> {
+        if !(MIN_SAMPLES..=MAX_SAMPLES).contains(&n) {
+            return Err(MeshError::SampleCount(n));
+        }
+        let positions = fibonacci_points(n, jitter, seed);
+        Self::from_points(positions, radius_km)
+    }
+
+    /// Builds the mesh for arbitrary unit vectors (at least [`MIN_SAMPLES`] of them, spread
+    /// over the whole sphere).
+    pub fn from_points(positions: Vec<DVec3>, radius_km: f64) -> Result<Self, MeshError> {
+        let n = positions.len();
+        let triangles = spherical_delaunay(&positions)
+            .ok_or_else(|| MeshError::Triangulation("degenerate point set".into()))?;
+        if triangles.len() != 2 * n - 4 {
+            return Err(MeshError::Triangulation(format!(
+                "{} triangles for {} samples, expected {}",
+                triangles.len(),
+                n,
+                2 * n - 4
+            )));
+        }
+        // Adjacency (CSR) from the undirected edges.
+        let mut edges: Vec<(u32, u32)> = Vec::with_capacity(triangles.len() * 6);
+        for t in &triangles {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                edges.push((a, b));
+                edges.push((b, a));
+            }
+        }
+        edges.par_sort_unstable();
+        edges.dedup();
+        let mut neighbor_start = vec![0u32; n + 1];
+        for &(a, _) in &edges {
+            neighbor_start[a as usize + 1] += 1;
+        }
+        for i in 0..n {
+            neighbor_start[i + 1] += neighbor_start[i];
+        }
+        let neighbors: Vec<u32> = edges.iter().map(|&(_, b)| b).collect();
+        drop(edges);
+
+        let r2 = radius_km * radius_km;
+        let mut area_km2 = vec![0.0f64; n];
+        let mut max_edge_rad = 0.0f64;
+        for t in &triangles {
+            let (a, b, c) = (positions[t[0] as usize], positions[t[1] as usize], positions[t[2] as usize]);
+            let third = spherical_triangle_area(a, b, c) * r2 / 3.0;
+            for &v in t {
+                area_km2[v as usize] += third;
+            }
+            max_edge_rad = max_edge_rad.max(angle_between(a, b)).max(angle_between(b, c)).max(angle_between(c, a));
+        }
+        let locator = MeshLocator::build(&positions, &triangles);
+        let mesh = Self { positions, triangles, neighbor_start, neighbors, area_km2, radius_km, max_edge_rad, locator };
+        mesh.check_topology()?;
+        Ok(mesh)
+    }
+
+    /// Number of samples.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// True for a mesh without samples (never the case for a built mesh).
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+
+    /// Neighbours of sample `i`.
+    #[inline]
+    pub fn neighbors_of(&self, i: usize) -> &[u32] {
+        &self.neighbors[self.neighbor_start[i] as usize..self.neighbor_start[i + 1] as usize]
+    }
+
+    /// Number of undirected edges.
+    pub fn edge_count(&self) -> usize {
+        self.neighbors.len() / 2
+    }
+
+    /// Euler characteristic V − E + F (2 for a closed sphere).
+    pub fn euler_characteristic(&self) -> i64 {
+        self.len() as i64 - self.edge_count() as i64 + self.triangles.len() as i64
+    }
+
+    /// Mean spacing between neighbouring samples, radians.
+    pub fn mean_spacing_rad(&self) -> f64 {
+        mean_spacing_rad(self.len())
+    }
+
+    /// Total area, km² (4πR² up to rounding).
+    pub fn total_area_km2(&self) -> f64 {
+        self.area_km2.iter().sum()
+    }
+
+    /// Locates unit vector `q` (in the reference frame) in exactly one triangle.
+    #[inline]
+    pub fn locate(&self, q: DVec3) -> Location {
+        self.locator.locate(&self.positions, &self.triangles, q)
+    }
+
+    /// Bytes held on the heap by the mesh.
+    pub fn heap_bytes(&self) -> usize {
+        self.positions.capacity() * 24
+            + self.triangles.capacity() * 12
+            + (self.neighbor_start.capacity() + self.neighbors.capacity()) * 4
+            + self.area_km2.capacity() * 8
+            + self.locator.heap_bytes()
+    }
+
+    /// Verifies orientation, Euler characteristic and that every edge borders two triangles.
+    fn check_topology(&self) -> Result<(), MeshError> {
+        let bad = self.triangles.par_iter().filter(|t| {
+            let (a, b, c) = (self.positions[t[0] as usize], self.positions[t[1] as usize], self.positions[t[2] as usize]);
+            !(triple(a, b, c) > 0.0)
+        });
+        let n_bad = bad.count();
+        if n_bad > 0 {
+            return Err(MeshError::Triangulation(format!("{n_bad} triangles are not oriented outward")));
+        }
+        if self.euler_characteristic() != 2 {
+            return Err(MeshError::Triangulation(format!("Euler characteristic {}", self.euler_characteristic())));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn orientation_and_euler_characteristic_at_several_sizes() {
+        for &(n, jitter) in &[(1000, 0.0), (1000, 0.5), (12_345, 0.3), (100_000, 0.0), (100_000, 0.9)] {
+            let m = SphereMesh::fibonacci(n, jitter, 7, 6370.0).expect("mesh");
+            assert_eq!(m.euler_characteristic(), 2, "n={n}");
+            assert_eq!(m.triangles.len(), 2 * n - 4);
+            // Every directed edge appears exactly once across triangles: a closed, consistently
+            // oriented surface.
+            let mut directed: Vec<(u32, u32)> = m
+                .triangles
+                .iter()
+                .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+                .collect();
+            directed.sort_unstable();
+            let before = directed.len();
+            directed.dedup();
+            assert_eq!(before, directed.len(), "a directed edge repeats: orientation flipped somewhere");
+            for t in &m.triangles {
+                let (a, b, c) = (m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]);
+                assert!(triple(a, b, c) > 0.0);
+            }
+            let area = m.total_area_km2();
+            let sphere = 4.0 * std::f64::consts::PI * 6370.0f64.powi(2);
+            assert!((area - sphere).abs() / sphere < 1e-9, "area {area} vs {sphere}");
+        }
+    }
+
+    #[test]
+    fn delaunay_property_holds() {
+        // No sample lies strictly inside the circumcircle of a triangle: check each triangle's
+        // neighbours across its edges (local Delaunay implies global).
+        let m = SphereMesh::fibonacci(5000, 0.6, 3, 1.0).expect("mesh");
+        for t in &m.triangles {
+            let (a, b, c) = (m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]);
+            let n = (b - a).cross(c - a).normalize();
+            let d = n.dot(a);
+            for &v in t {
+                for &w in m.neighbors_of(v as usize) {
+                    if t.contains(&w) {
+                        continue;
+                    }
+                    assert!(n.dot(m.positions[w as usize]) <= d + 1e-12, "sample {w} inside circumcircle");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bad_sample_counts_are_rejected() {
+        assert!(matches!(SphereMesh::fibonacci(999, 0.0, 1, 1.0), Err(MeshError::SampleCount(999))));
+        assert!(matches!(SphereMesh::fibonacci(4_000_001, 0.0, 1, 1.0), Err(MeshError::SampleCount(_))));
+    }
+
+    #[test]
+    fn every_point_lands_in_exactly_one_containing_triangle() {
+        let m = SphereMesh::fibonacci(3000, 0.4, 11, 1.0).expect("mesh");
+        let mut probes: Vec<DVec3> = m.positions.clone();
+        for t in m.triangles.iter().take(500) {
+            let (a, b, c) = (m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]);
+            probes.push((a + b).normalize()); // on an edge
+            probes.push((a + b + c).normalize()); // inside
+        }
+        for i in 0..20_000u64 {
+            probes.push(crate::random::unit_vector(crate::random::hash3(1, 2, i), crate::random::hash3(1, 3, i)));
+        }
+        for q in probes {
+            let loc = m.locate(q);
+            let t = m.triangles[loc.triangle as usize];
+            let (a, b, c) = (m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]);
+            assert!(loc.weights.iter().all(|&w| w >= -1e-9), "{loc:?}");
+            assert!((loc.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+            let rebuilt = (a * loc.weights[0] + b * loc.weights[1] + c * loc.weights[2]).normalize();
+            assert!((rebuilt - q).length() < 1e-9);
+            // Deterministic: the same point always gives the same triangle.
+            assert_eq!(m.locate(q), loc);
+        }
+        // A sample sits at a vertex of its triangle with weight 1.
+        for (i, &p) in m.positions.iter().enumerate().take(500) {
+            let loc = m.locate(p);
+            let t = m.triangles[loc.triangle as usize];
+            let k = loc.dominant_corner();
+            assert_eq!(t[k] as usize, i);
+            assert!((loc.weights[k] - 1.0).abs() < 1e-12);
+        }
+    }
+}

@@ -1,5 +1,33 @@
 //! Procedural tectonic planets: plates drift on a sphere, rift, collide and subduct, and
-//! continents, ranges, trenches and ridges come out of that history (after Cortial et al. 2019).
+//! continents, ranges, trenches and ridges come out of that history (after Cortial et al. 2019,
+//! *Procedural Tectonic Planets*).
+//!
+//! The simulation is an ECS world (bevy_ecs): per-sample crust fields are structure-of-arrays
+//! resources, plates are entities, and each phenomenon is a plugin whose systems sit in one set
+//! of the [`TectonicStep`](plugins::TectonicStep) schedule. Start with [`Simulation`].
 
+pub mod components;
 pub mod geometry;
+pub mod io;
+pub mod plugins;
 pub mod random;
+pub mod resources;
+pub mod simulation;
+pub mod systems;
+
+pub use simulation::{SimError, Simulation};
+
+/// What a user or plugin author imports.
+pub mod prelude {
+    pub use crate::components::{Plate, PlateBounds, PlateFrame, PlateId, PlateMesh, PlateMotion, PlateStats};
+    pub use crate::geometry::SphereMesh;
+    pub use crate::io::params::{ParamError, ParamValue, Params};
+    pub use crate::plugins::{
+        AgingPlugin, DiagnosticsPlugin, DriftPlugin, ErosionPlugin, OceanicCrustPlugin, PhenomenonAppExt,
+        ResamplePlugin, ResampleSystems, TectonicPlugins, TectonicStep, TectonicSystems,
+    };
+    pub use crate::resources::{Crust, CrustType, Orogeny, Phenomena, phenomenon_enabled};
+    pub use crate::simulation::{SimError, Simulation};
+    pub use bevy_app::{App, Plugin, PluginGroup};
+    pub use bevy_ecs::prelude::*;
+}

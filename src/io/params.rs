@@ -1,0 +1,1459 @@
+//! Model parameters of the tectonic planet generator: one [`Params`] struct with every constant in physical units, its schema, dotted-key access, validation, TOML loading and a commented-TOML printer, all generated from a single declaration table.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// A parameter value of one of the supported kinds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ParamValue {
+    /// A real number (always finite once accepted).
+    Float(f64),
+    /// A non-negative integer.
+    Int(u64),
+    /// A boolean flag.
+    Bool(bool),
+}
+
+impl fmt::Display for ParamValue {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ParamValue::Float(x) => f.write_str(&format_float(*x)),
+            ParamValue::Int(n) => write!(f, "{n}"),
+            ParamValue::Bool(b) => write!(f, "{b}"),
+        }
+    }
+}
+
+/// The kind (type) of a parameter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ParamKind {
+    /// Stored as `f64`.
+    Float,
+    /// Stored as `u64`.
+    Int,
+    /// Stored as `bool`.
+    Bool,
+}
+
+impl ParamKind {
+    /// What a value of this kind must look like, for error messages.
+    fn expectation(self) -> &'static str {
+        match self {
+            ParamKind::Float => "a number",
+            ParamKind::Int => "a non-negative integer",
+            ParamKind::Bool => "true or false",
+        }
+    }
+}
+
+/// Description of one parameter, as declared in the parameter table.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParamSpec {
+    /// Full dotted key, e.g. `"ocean.ridge_elevation_km"`.
+    pub key: &'static str,
+    /// Section (TOML table) name, e.g. `"ocean"`.
+    pub section: &'static str,
+    /// Key name within the section, e.g. `"ridge_elevation_km"`.
+    pub name: &'static str,
+    /// Value kind.
+    pub kind: ParamKind,
+    /// Physical unit (may be empty for dimensionless values).
+    pub unit: &'static str,
+    /// One-line description.
+    pub doc: &'static str,
+    /// Default value.
+    pub default: ParamValue,
+    /// Smallest allowed value (inclusive), as `f64`. Integer bounds are
+    /// checked exactly against their declared integer values.
+    pub min: f64,
+    /// Largest allowed value (inclusive), as `f64`. Integer bounds are
+    /// checked exactly against their declared integer values.
+    pub max: f64,
+}
+
+/// Everything that can go wrong while setting, loading or validating parameters.
+/// The `Display` text is meant to be shown to users as is.
+#[derive(Debug, thiserror::Error)]
+pub enum ParamError {
+    /// The parameter file does not exist.
+    #[error("parameter file \"{}\" does not exist", path.display())]
+    FileNotFound {
+        /// The path that was given.
+        path: PathBuf,
+    },
+    /// The parameter path names a directory.
+    #[error("parameter file \"{}\" is a directory, not a file", path.display())]
+    IsDirectory {
+        /// The path that was given.
+        path: PathBuf,
+    },
+    /// The parameter file exists but could not be read (permissions, not UTF-8, ...).
+    #[error("cannot read parameter file \"{}\": {source}", path.display())]
+    Unreadable {
+        /// The path that was given.
+        path: PathBuf,
+        /// The underlying I/O error.
+        source: std::io::Error,
+    },
+    /// The text is not valid TOML.
+    #[error("malformed TOML: {message}")]
+    MalformedToml {
+        /// 1-based line of the error, when known.
+        line: Option<usize>,
+        /// 1-based column (in characters) of the error, when known.
+        column: Option<usize>,
+        /// The TOML parser's full message (includes line, column and an excerpt).
+        message: String,
+    },
+    /// A top-level table that is not a parameter section.
+    #[error("unknown parameter section [{section}]{}", fmt_suggestion(suggestion))]
+    UnknownSection {
+        /// The section name as written.
+        section: String,
+        /// The nearest valid section or full key, if any is close.
+        suggestion: Option<String>,
+    },
+    /// A section name was used with a non-table value (e.g. `ocean = 3`).
+    #[error("\"{section}\" is a parameter section and must be a table ([{section}]), got {found}")]
+    SectionNotTable {
+        /// The section name.
+        section: String,
+        /// Description of what was found instead.
+        found: String,
+    },
+    /// A key that is not a parameter.
+    #[error("unknown parameter \"{key}\"{}", fmt_suggestion(suggestion))]
+    UnknownKey {
+        /// The full dotted key as written.
+        key: String,
+        /// The nearest valid full key, if any is close.
+        suggestion: Option<String>,
+    },
+    /// The value has the wrong type for the parameter.
+    #[error("parameter \"{key}\" must be {}, got {found}", expected.expectation())]
+    WrongType {
+        /// The full dotted key.
+        key: String,
+        /// The kind the parameter has.
+        expected: ParamKind,
+        /// Description of the value that was given.
+        found: String,
+    },
+    /// A non-integral number was given for an integer parameter.
+    #[error("parameter \"{key}\" must be an integer, got {}", format_float(*value))]
+    NotIntegral {
+        /// The full dotted key.
+        key: String,
+        /// The value given.
+        value: f64,
+    },
+    /// A negative number was given for an integer parameter.
+    #[error("parameter \"{key}\" must be a non-negative integer, got {value}")]
+    Negative {
+        /// The full dotted key.
+        key: String,
+        /// The value given, as written.
+        value: String,
+    },
+    /// NaN or an infinity was given.
+    #[error("parameter \"{key}\" = {} is not a finite number", format_float(*value))]
+    NonFinite {
+        /// The full dotted key.
+        key: String,
+        /// The value given.
+        value: f64,
+    },
+    /// The value lies outside the parameter's allowed range.
+    #[error("parameter \"{key}\" = {value} is out of range: allowed {min}..={max}")]
+    OutOfRange {
+        /// The full dotted key.
+        key: String,
+        /// The value given.
+        value: ParamValue,
+        /// Smallest allowed value.
+        min: ParamValue,
+        /// Largest allowed value.
+        max: ParamValue,
+    },
+    /// More plates than the sample count can support.
+    #[error(
+        "init.plates = {plates} is too many for planet.samples = {samples}: every plate needs at least 20 samples, so at most {max_plates} plates are allowed (lower init.plates or raise planet.samples)"
+    )]
+    TooManyPlates {
+        /// `init.plates`.
+        plates: u64,
+        /// `planet.samples`.
+        samples: u64,
+        /// `planet.samples / 20`.
+        max_plates: u64,
+    },
+    /// Oceanic reference elevations are not ordered.
+    #[error(
+        "oceanic elevations must satisfy ocean.trench_elevation_km < ocean.abyssal_elevation_km < ocean.ridge_elevation_km < 0, got {} < {} < {} < 0",
+        format_float(*trench), format_float(*abyssal), format_float(*ridge)
+    )]
+    OceanElevationOrder {
+        /// `ocean.trench_elevation_km`.
+        trench: f64,
+        /// `ocean.abyssal_elevation_km`.
+        abyssal: f64,
+        /// `ocean.ridge_elevation_km`.
+        ridge: f64,
+    },
+    /// Resampling interval bounds are inverted.
+    #[error(
+        "resample.min_interval_steps = {min} must not exceed resample.max_interval_steps = {max}"
+    )]
+    ResampleInterval {
+        /// `resample.min_interval_steps`.
+        min: u64,
+        /// `resample.max_interval_steps`.
+        max: u64,
+    },
+}
+
+fn fmt_suggestion(s: &Option<String>) -> String {
+    match s {
+        Some(s) => format!("; did you mean \"{s}\"?"),
+        None => String::new(),
+    }
+}
+
+/// Formats a float so that it parses back (in Rust and TOML) to the same value:
+/// shortest round-trip digits, always with a `.` or exponent; `nan`/`inf` as TOML spells them.
+fn format_float(x: f64) -> String {
+    if x.is_nan() {
+        "nan".to_string()
+    } else if x.is_infinite() {
+        if x > 0.0 {
+            "inf".to_string()
+        } else {
+            "-inf".to_string()
+        }
+    } else {
+        // `{:?}` gives shortest round-trip digits: 6370.0, 1.3e-5, 1e16.
+        format!("{x:?}")
+    }
+}
+
+/// Helpers to map the declared Rust type of a field onto the parameter kinds.
+trait ParamType: Sized + Copy {
+    fn to_value(self) -> ParamValue;
+    fn from_value(v: ParamValue) -> Option<Self>;
+}
+
+impl ParamType for f64 {
+    fn to_value(self) -> ParamValue {
+        ParamValue::Float(self)
+    }
+    fn from_value(v: ParamValue) -> Option<Self> {
+        match v {
+            ParamValue::Float(x) => Some(x),
+            _ => None,
+        }
+    }
+}
+
+impl ParamType for u64 {
+    fn to_value(self) -> ParamValue {
+        ParamValue::Int(self)
+    }
+    fn from_value(v: ParamValue) -> Option<Self> {
+        match v {
+            ParamValue::Int(x) => Some(x),
+            _ => None,
+        }
+    }
+}
+
+impl ParamType for bool {
+    fn to_value(self) -> ParamValue {
+        ParamValue::Bool(self)
+    }
+    fn from_value(v: ParamValue) -> Option<Self> {
+        match v {
+            ParamValue::Bool(x) => Some(x),
+            _ => None,
+        }
+    }
+}
+
+/// Kind of a declared field type (const context).
+macro_rules! param_kind {
+    (f64) => {
+        ParamKind::Float
+    };
+    (u64) => {
+        ParamKind::Int
+    };
+    (bool) => {
+        ParamKind::Bool
+    };
+}
+
+/// A `ParamValue` from a literal of a declared field type (const context).
+macro_rules! param_value {
+    (f64, $v:expr) => {
+        ParamValue::Float($v)
+    };
+    (u64, $v:expr) => {
+        ParamValue::Int($v)
+    };
+    (bool, $v:expr) => {
+        ParamValue::Bool($v)
+    };
+}
+
+/// A bound as `f64` for `ParamSpec::min`/`max` (const context).
+macro_rules! bound_f64 {
+    (f64, $v:expr) => {
+        $v
+    };
+    (u64, $v:expr) => {{
+        const V: u64 = $v;
+        V as f64
+    }};
+    (bool, $v:expr) => {{
+        const V: bool = $v;
+        V as u8 as f64
+    }};
+}
+
+/// Declares every section and field once and generates the structs, `Default`,
+/// the schema, exact typed bounds, and dotted-key get/set.
+macro_rules! define_params {
+    ($(
+        $(#[doc = $sdoc:literal])*
+        [$sec:ident] $Sec:ident {
+            $( $name:ident : $ty:ident = $def:literal,
+               $min:literal ..= $max:literal, $unit:literal, $doc:literal; )*
+        }
+    )*) => {
+        $(
+            $(#[doc = $sdoc])*
+            #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+            #[serde(default, deny_unknown_fields)]
+            pub struct $Sec {
+                $(
+                    #[doc = concat!($doc, " Unit: ", $unit, "; range ", stringify!($min), "..=", stringify!($max), "; default ", stringify!($def), ".")]
+                    pub $name: $ty,
+                )*
+            }
+
+            impl Default for $Sec {
+                fn default() -> Self {
+                    Self { $( $name: $def, )* }
+                }
+            }
+        )*
+
+        /// All model parameters, grouped by section, in physical units.
+        #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, bevy_ecs::resource::Resource)]
+        #[serde(default, deny_unknown_fields)]
+        pub struct Params {
+            $(
+                $(#[doc = $sdoc])*
+                pub $sec: $Sec,
+            )*
+        }
+
+        impl Default for Params {
+            fn default() -> Self {
+                Self { $( $sec: $Sec::default(), )* }
+            }
+        }
+
+        /// The schema, in declaration order.
+        static SCHEMA: &[ParamSpec] = &[
+            $( $(
+                ParamSpec {
+                    key: concat!(stringify!($sec), ".", stringify!($name)),
+                    section: stringify!($sec),
+                    name: stringify!($name),
+                    kind: param_kind!($ty),
+                    unit: $unit,
+                    doc: $doc,
+                    default: param_value!($ty, $def),
+                    min: bound_f64!($ty, $min),
+                    max: bound_f64!($ty, $max),
+                },
+            )* )*
+        ];
+
+        /// Exact typed bounds, parallel to `SCHEMA`.
+        static BOUNDS: &[(ParamValue, ParamValue)] = &[
+            $( $( (param_value!($ty, $min), param_value!($ty, $max)), )* )*
+        ];
+
+        /// Section names in declaration order.
+        static SECTIONS: &[&str] = &[ $( stringify!($sec), )* ];
+
+        impl Params {
+            /// Reads a field by its full dotted key.
+            fn get_field(&self, key: &str) -> Option<ParamValue> {
+                $( $(
+                    if key == concat!(stringify!($sec), ".", stringify!($name)) {
+                        return Some(ParamType::to_value(self.$sec.$name));
+                    }
+                )* )*
+                None
+            }
+
+            /// Stores an already checked value of the right kind; false if the key
+            /// is unknown or the kind does not match.
+            fn put_field(&mut self, key: &str, value: ParamValue) -> bool {
+                $( $(
+                    if key == concat!(stringify!($sec), ".", stringify!($name)) {
+                        return match <$ty as ParamType>::from_value(value) {
+                            Some(v) => { self.$sec.$name = v; true }
+                            None => false,
+                        };
+                    }
+                )* )*
+                false
+            }
+        }
+    };
+}
+
+define_params! {
+    /// Planet geometry and sampling.
+    [planet] Planet {
+        radius_km: f64 = 6370.0, 100.0..=100000.0, "km", "Planet radius R (paper Appendix A).";
+        samples: u64 = 500000, 1000..=4000000, "", "Number of crust samples on the sphere (Fibonacci points).";
+        seed: u64 = 1, 0..=9223372036854775807, "", "Random seed: the same seed and parameters give the same planet at every resolution.";
+        sample_jitter: f64 = 0.3, 0.0..=0.9, "fraction of spacing", "Random displacement of each Fibonacci sample, as a fraction of the mean sample spacing.";
+    }
+    /// Time stepping.
+    [time] Time {
+        time_step_my: f64 = 2.0, 0.1..=10.0, "My", "Time step δt (paper Appendix A).";
+    }
+    /// Initial planet state.
+    [init] Init {
+        plates: u64 = 40, 2..=2000, "", "Initial number of plates.";
+        continental_fraction: f64 = 0.3, 0.0..=0.95, "fraction of area", "Target fraction of the surface covered by continental crust at start.";
+        border_warp_km: f64 = 600.0, 0.0..=3000.0, "km", "Amplitude of the low-frequency noise that warps the Voronoi plate borders (replaces Driftworld's mesh-based vector noise n_sm and border shifts n_vb, which depend on resolution).";
+        border_warp_wavelength_km: f64 = 3000.0, 100.0..=40000.0, "km", "Wavelength of the plate-border warping noise.";
+        continent_wavelength_km: f64 = 4000.0, 100.0..=40000.0, "km", "Wavelength of the noise that shapes the initial coastlines.";
+        continental_elevation_km: f64 = 0.8, -2.0..=5.0, "km", "Mean initial elevation of continental crust (Driftworld z_0c).";
+        oceanic_elevation_km: f64 = -4.0, -10.0..=0.0, "km", "Mean initial elevation of oceanic crust (Driftworld z_0t and its average ocean depth).";
+        elevation_noise_km: f64 = 0.4, 0.0..=5.0, "km", "Amplitude of the low-frequency noise on initial elevations.";
+        continental_thickness_km: f64 = 35.0, 1.0..=100.0, "km", "Initial thickness of continental crust.";
+        oceanic_thickness_km: f64 = 7.0, 1.0..=100.0, "km", "Thickness of oceanic crust, initial and newly formed (Driftworld's basic thickness e_0).";
+    }
+    /// Plate motion.
+    [plates] Plates {
+        max_speed_mm_per_yr: f64 = 100.0, 1.0..=1000.0, "mm/yr", "Maximum plate surface speed v0 (paper Appendix A).";
+        min_speed_fraction: f64 = 0.1, 0.0..=1.0, "fraction of v0", "Initial plate speeds are drawn uniformly between this fraction of v0 and v0.";
+    }
+    /// Oceanic crust.
+    [ocean] Ocean {
+        ridge_elevation_km: f64 = -1.0, -10.0..=0.0, "km", "Highest oceanic ridge elevation z_r.";
+        abyssal_elevation_km: f64 = -6.0, -15.0..=0.0, "km", "Abyssal plain elevation z_a.";
+        trench_elevation_km: f64 = -10.0, -20.0..=0.0, "km", "Oceanic trench elevation z_t.";
+        damping_mm_per_yr: f64 = 0.04, 0.0..=10.0, "mm/yr", "Oceanic elevation damping ε_o.";
+        sediment_accretion_mm_per_yr: f64 = 0.3, 0.0..=10.0, "mm/yr", "Sediment accretion in trenches ε_t.";
+    }
+    /// Continental crust.
+    [continent] Continent {
+        max_elevation_km: f64 = 10.0, 1.0..=30.0, "km", "Highest continental altitude z_c.";
+        erosion_mm_per_yr: f64 = 0.03, 0.0..=10.0, "mm/yr", "Continental erosion ε_c.";
+    }
+    /// Subduction.
+    [subduction] Subduction {
+        distance_km: f64 = 1800.0, 10.0..=10000.0, "km", "Subduction distance r_s: reach of the uplift on the overriding plate.";
+        control_distance_km: f64 = 637.0, 1.0..=10000.0, "km", "Distance from the front where subduction uplift peaks (Driftworld r_c = 0.1 R).";
+        uplift_mm_per_yr: f64 = 0.6, 0.0..=100.0, "mm/yr", "Base subduction uplift u0.";
+        fold_weight: f64 = 0.1, 0.0..=10.0, "", "β: weight of the relative plate velocity in the fold direction update.";
+        slab_pull_perturbation: f64 = 1.0, 0.0..=100.0, "", "Slab pull ε, normalised by samples per plate (Driftworld ε).";
+    }
+    /// Continental collision.
+    [collision] Collision {
+        distance_km: f64 = 4200.0, 10.0..=20000.0, "km", "Maximum collision influence distance r_c.";
+        coefficient_per_km: f64 = 1.3e-5, 0.0..=1.0, "1/km", "Discrete collision coefficient Δ_c.";
+        interpenetration_km: f64 = 300.0, 0.0..=5000.0, "km", "Interpenetration of continental crust that triggers a collision.";
+    }
+    /// Plate rifting.
+    [rifting] Rifting {
+        frequency_per_my: f64 = 0.1, 0.0..=10.0, "1/My", "Average rifting frequency λ0 (Driftworld).";
+    }
+    /// Global resampling.
+    [resample] Resample {
+        min_interval_steps: u64 = 10, 1..=1000, "steps", "Fewest steps between two global resamplings.";
+        max_interval_steps: u64 = 60, 1..=1000, "steps", "Most steps between two global resamplings.";
+        adaptive_displacement_km: f64 = 2000.0, 1.0..=20000.0, "km", "Resample once the fastest plate has moved this far (clamped to the interval bounds); 10 steps at v0, as in the paper.";
+        fragment_min_area_km2: f64 = 500000.0, 0.0..=1e9, "km²", "A disconnected piece of a plate smaller than this joins the neighbouring plate; a larger piece becomes a plate of its own.";
+    }
+}
+
+/// Keys longer than this get no suggestion (keeps the edit-distance work bounded).
+const MAX_SUGGEST_LEN: usize = 256;
+
+/// Levenshtein edit distance between two strings, counted in `char`s.
+fn levenshtein(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut prev: Vec<usize> = (0..=b.len()).collect();
+    let mut cur: Vec<usize> = vec![0; b.len() + 1];
+    for (i, ca) in a.chars().enumerate() {
+        cur[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let sub = prev[j] + usize::from(ca != *cb);
+            cur[j + 1] = sub.min(prev[j + 1] + 1).min(cur[j] + 1);
+        }
+        std::mem::swap(&mut prev, &mut cur);
+    }
+    prev[b.len()]
+}
+
+/// Largest edit distance at which a suggestion is offered for `s`.
+fn suggest_threshold(s: &str) -> usize {
+    2.max(s.chars().count() / 4)
+}
+
+/// Nearest valid full key for an unknown `section.name`: either a close full key,
+/// or the same (or a close) name in another section.
+fn suggest_key(section: &str, name: &str) -> Option<String> {
+    if section.len() + name.len() > MAX_SUGGEST_LEN {
+        return None;
+    }
+    let full = format!("{section}.{name}");
+    let mut best: Option<(usize, &'static str)> = None;
+    for spec in SCHEMA {
+        let by_full = levenshtein(&full, spec.key);
+        // A right (or nearly right) name in the wrong section costs one edit.
+        let by_name = levenshtein(name, spec.name) + usize::from(section != spec.section);
+        let d = by_full.min(by_name);
+        if best.is_none_or(|(bd, _)| d < bd) {
+            best = Some((d, spec.key));
+        }
+    }
+    match best {
+        Some((d, key)) if d <= suggest_threshold(&full) => Some(key.to_string()),
+        _ => None,
+    }
+}
+
+/// Suggestion for an unknown top-level name: a close section name, or the full key
+/// of a parameter with that (or a close) name.
+fn suggest_top_level(name: &str) -> Option<String> {
+    if name.len() > MAX_SUGGEST_LEN {
+        return None;
+    }
+    let threshold = suggest_threshold(name);
+    let mut best: Option<(usize, String)> = None;
+    for sec in SECTIONS {
+        let d = levenshtein(name, sec);
+        if best.as_ref().is_none_or(|(bd, _)| d < *bd) {
+            best = Some((d, (*sec).to_string()));
+        }
+    }
+    for spec in SCHEMA {
+        // Missing section: one edit, plus any typo in the name.
+        let d = levenshtein(name, spec.name) + 1;
+        if best.as_ref().is_none_or(|(bd, _)| d < *bd) {
+            best = Some((d, spec.key.to_string()));
+        }
+    }
+    match best {
+        Some((d, s)) if d <= threshold => Some(s),
+        _ => None,
+    }
+}
+
+/// Short description of a TOML value for error messages.
+fn describe_toml(v: &toml::Value) -> String {
+    match v {
+        toml::Value::String(s) => {
+            let shown: String = s.chars().take(40).collect();
+            let ellipsis = if s.chars().count() > 40 { "..." } else { "" };
+            format!("string {:?}", format!("{shown}{ellipsis}"))
+        }
+        toml::Value::Integer(i) => format!("integer {i}"),
+        toml::Value::Float(x) => format!("float {}", format_float(*x)),
+        toml::Value::Boolean(b) => format!("boolean {b}"),
+        toml::Value::Datetime(d) => format!("datetime {d}"),
+        toml::Value::Array(_) => "an array".to_string(),
+        toml::Value::Table(_) => "a table".to_string(),
+    }
+}
+
+/// Short description of a `ParamValue` for error messages.
+fn describe_value(v: ParamValue) -> String {
+    match v {
+        ParamValue::Float(x) => format!("float {}", format_float(x)),
+        ParamValue::Int(n) => format!("integer {n}"),
+        ParamValue::Bool(b) => format!("boolean {b}"),
+    }
+}
+
+/// Index of a key in the schema.
+fn spec_index(key: &str) -> Option<usize> {
+    SCHEMA.iter().position(|s| s.key == key)
+}
+
+/// Error for a key that is not in the schema.
+fn unknown_key(key: &str) -> ParamError {
+    let suggestion = match key.split_once('.') {
+        Some((section, name)) => suggest_key(section, name),
+        None => suggest_top_level(key),
+    };
+    ParamError::UnknownKey {
+        key: key.to_string(),
+        suggestion,
+    }
+}
+
+/// Converts `value` to the kind of `spec` and checks finiteness and range.
+fn check_value(
+    spec: &ParamSpec,
+    bounds: (ParamValue, ParamValue),
+    value: ParamValue,
+) -> Result<ParamValue, ParamError> {
+    let key = || spec.key.to_string();
+    let wrong = |v: ParamValue| ParamError::WrongType {
+        key: key(),
+        expected: spec.kind,
+        found: describe_value(v),
+    };
+    let converted = match (spec.kind, value) {
+        (ParamKind::Float, ParamValue::Float(x)) => ParamValue::Float(x),
+        (ParamKind::Float, ParamValue::Int(n)) => ParamValue::Float(n as f64),
+        (ParamKind::Int, ParamValue::Int(n)) => ParamValue::Int(n),
+        (ParamKind::Int, ParamValue::Float(x)) => {
+            if !x.is_finite() {
+                return Err(ParamError::NonFinite {
+                    key: key(),
+                    value: x,
+                });
+            }
+            if x.fract() != 0.0 {
+                return Err(ParamError::NotIntegral {
+                    key: key(),
+                    value: x,
+                });
+            }
+            if x < 0.0 {
+                return Err(ParamError::Negative {
+                    key: key(),
+                    value: format_float(x),
+                });
+            }
+            // 2^64 and above cannot be represented; they are out of any range anyway.
+            if x >= 18_446_744_073_709_551_616.0 {
+                return Err(ParamError::OutOfRange {
+                    key: key(),
+                    value: ParamValue::Float(x),
+                    min: bounds.0,
+                    max: bounds.1,
+                });
+            }
+            ParamValue::Int(x as u64)
+        }
+        (ParamKind::Bool, ParamValue::Bool(b)) => ParamValue::Bool(b),
+        (_, v) => return Err(wrong(v)),
+    };
+    let in_range = match (converted, bounds) {
+        (ParamValue::Float(x), (ParamValue::Float(lo), ParamValue::Float(hi))) => {
+            if !x.is_finite() {
+                return Err(ParamError::NonFinite {
+                    key: key(),
+                    value: x,
+                });
+            }
+            lo <= x && x <= hi
+        }
+        (ParamValue::Int(n), (ParamValue::Int(lo), ParamValue::Int(hi))) => lo <= n && n <= hi,
+        (ParamValue::Bool(_), _) => true,
+        _ => false,
+    };
+    if in_range {
+        Ok(converted)
+    } else {
+        Err(ParamError::OutOfRange {
+            key: key(),
+            value: converted,
+            min: bounds.0,
+            max: bounds.1,
+        })
+    }
+}
+
+/// Converts a TOML value into a `ParamValue` for `spec` (type check only).
+fn from_toml_value(spec: &ParamSpec, v: &toml::Value) -> Result<ParamValue, ParamError> {
+    match (spec.kind, v) {
+        (ParamKind::Float, toml::Value::Integer(i)) => Ok(ParamValue::Float(*i as f64)),
+        (ParamKind::Int, toml::Value::Integer(i)) => u64::try_from(*i)
+            .map(ParamValue::Int)
+            .map_err(|_| ParamError::Negative {
+                key: spec.key.to_string(),
+                value: i.to_string(),
+            }),
+        (ParamKind::Float | ParamKind::Int, toml::Value::Float(x)) => Ok(ParamValue::Float(*x)),
+        (ParamKind::Bool, toml::Value::Boolean(b)) => Ok(ParamValue::Bool(*b)),
+        (kind, other) => Err(ParamError::WrongType {
+            key: spec.key.to_string(),
+            expected: kind,
+            found: describe_toml(other),
+        }),
+    }
+}
+
+/// 1-based line and column (in chars) of a byte offset in `text`.
+fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let mut line = 1;
+    let mut column = 1;
+    for (i, c) in text.char_indices() {
+        if i >= offset {
+            break;
+        }
+        if c == '\n' {
+            line += 1;
+            column = 1;
+        } else {
+            column += 1;
+        }
+    }
+    (line, column)
+}
+
+impl Params {
+    /// Every parameter, in declaration order (section by section).
+    pub fn schema() -> &'static [ParamSpec] {
+        SCHEMA
+    }
+
+    /// The current value of the parameter with the full dotted `key`
+    /// (e.g. `"ocean.ridge_elevation_km"`), or `None` for an unknown key.
+    pub fn get(&self, key: &str) -> Option<ParamValue> {
+        self.get_field(key)
+    }
+
+    /// Sets a parameter by full dotted key after checking its type, finiteness and
+    /// range. An `Int` is accepted for a float parameter; a `Float` is accepted for an
+    /// integer parameter only if it is integral and non-negative. Cross-field checks
+    /// are left to [`Params::validate`]. On error, `self` is unchanged.
+    pub fn set(&mut self, key: &str, value: ParamValue) -> Result<(), ParamError> {
+        let index = spec_index(key).ok_or_else(|| unknown_key(key))?;
+        let (Some(spec), Some(bounds)) = (SCHEMA.get(index), BOUNDS.get(index)) else {
+            return Err(unknown_key(key));
+        };
+        let checked = check_value(spec, *bounds, value)?;
+        if self.put_field(key, checked) {
+            Ok(())
+        } else {
+            Err(ParamError::WrongType {
+                key: key.to_string(),
+                expected: spec.kind,
+                found: describe_value(value),
+            })
+        }
+    }
+
+    /// Checks every field (finiteness and range) and the cross-field constraints:
+    /// `init.plates <= planet.samples / 20`,
+    /// `ocean.trench_elevation_km < ocean.abyssal_elevation_km < ocean.ridge_elevation_km < 0`,
+    /// `resample.min_interval_steps <= resample.max_interval_steps`.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        for (spec, bounds) in SCHEMA.iter().zip(BOUNDS) {
+            if let Some(v) = self.get_field(spec.key) {
+                check_value(spec, *bounds, v)?;
+            }
+        }
+        let max_plates = self.planet.samples / 20;
+        if self.init.plates > max_plates {
+            return Err(ParamError::TooManyPlates {
+                plates: self.init.plates,
+                samples: self.planet.samples,
+                max_plates,
+            });
+        }
+        let o = &self.ocean;
+        if !(o.trench_elevation_km < o.abyssal_elevation_km
+            && o.abyssal_elevation_km < o.ridge_elevation_km
+            && o.ridge_elevation_km < 0.0)
+        {
+            return Err(ParamError::OceanElevationOrder {
+                trench: o.trench_elevation_km,
+                abyssal: o.abyssal_elevation_km,
+                ridge: o.ridge_elevation_km,
+            });
+        }
+        let r = &self.resample;
+        if r.min_interval_steps > r.max_interval_steps {
+            return Err(ParamError::ResampleInterval {
+                min: r.min_interval_steps,
+                max: r.max_interval_steps,
+            });
+        }
+        Ok(())
+    }
+
+    /// Parses parameters from TOML text. Starts from the defaults; the text may give
+    /// any subset of sections and keys. The result is fully validated.
+    pub fn from_toml_str(text: &str) -> Result<Params, ParamError> {
+        let table: toml::Table = toml::from_str(text).map_err(|e| {
+            let (line, column) = match e.span() {
+                Some(span) => {
+                    let (l, c) = line_column(text, span.start);
+                    (Some(l), Some(c))
+                }
+                None => (None, None),
+            };
+            ParamError::MalformedToml {
+                line,
+                column,
+                message: e.to_string().trim_end().to_string(),
+            }
+        })?;
+        let mut params = Params::default();
+        for (section, value) in &table {
+            let is_section = SECTIONS.contains(&section.as_str());
+            let entries = match value {
+                toml::Value::Table(t) if is_section => t,
+                toml::Value::Table(_) => {
+                    return Err(ParamError::UnknownSection {
+                        section: section.clone(),
+                        suggestion: suggest_top_level(section),
+                    });
+                }
+                other if is_section => {
+                    return Err(ParamError::SectionNotTable {
+                        section: section.clone(),
+                        found: describe_toml(other),
+                    });
+                }
+                _ => return Err(unknown_key(section)),
+            };
+            for (name, value) in entries {
+                let key = format!("{section}.{name}");
+                let Some(index) = spec_index(&key) else {
+                    return Err(ParamError::UnknownKey {
+                        key,
+                        suggestion: suggest_key(section, name),
+                    });
+                };
+                let Some(spec) = SCHEMA.get(index) else {
+                    return Err(unknown_key(&key));
+                };
+                let v = from_toml_value(spec, value)?;
+                params.set(&key, v)?;
+            }
+        }
+        params.validate()?;
+        Ok(params)
+    }
+
+    /// Reads and parses a TOML parameter file (see [`Params::from_toml_str`]).
+    pub fn load(path: &Path) -> Result<Params, ParamError> {
+        let owned = || path.to_path_buf();
+        match std::fs::metadata(path) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Err(ParamError::FileNotFound { path: owned() });
+            }
+            Err(source) => {
+                return Err(ParamError::Unreadable {
+                    path: owned(),
+                    source,
+                });
+            }
+            Ok(m) if m.is_dir() => return Err(ParamError::IsDirectory { path: owned() }),
+            Ok(_) => {}
+        }
+        let text = std::fs::read_to_string(path).map_err(|source| match source.kind() {
+            std::io::ErrorKind::NotFound => ParamError::FileNotFound { path: owned() },
+            std::io::ErrorKind::IsADirectory => ParamError::IsDirectory { path: owned() },
+            _ => ParamError::Unreadable {
+                path: owned(),
+                source,
+            },
+        })?;
+        Params::from_toml_str(&text)
+    }
+
+    /// Prints every section and key as TOML, each key preceded by a comment
+    /// `# doc [unit] (range min..max)` (the unit part is left out for dimensionless
+    /// values). The output parses back with [`Params::from_toml_str`] to an equal
+    /// `Params` (provided `self` is valid).
+    pub fn to_commented_toml(&self) -> String {
+        let mut out = String::new();
+        out.push_str("# Parameters of the tectonic planet generator, in physical units.\n");
+        out.push_str(
+            "# Every section and key is optional: anything left out takes the default value.\n",
+        );
+        let mut current = "";
+        for (spec, (lo, hi)) in SCHEMA.iter().zip(BOUNDS) {
+            if spec.section != current {
+                current = spec.section;
+                out.push_str(&format!("\n[{current}]\n"));
+            }
+            let unit = if spec.unit.is_empty() {
+                String::new()
+            } else {
+                format!(" [{}]", spec.unit)
+            };
+            out.push_str(&format!("# {}{} (range {}..{})\n", spec.doc, unit, lo, hi));
+            let value = self.get_field(spec.key).unwrap_or(spec.default);
+            out.push_str(&format!("{} = {}\n", spec.name, value));
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::HashSet;
+
+    fn err(text: &str) -> ParamError {
+        match Params::from_toml_str(text) {
+            Ok(p) => panic!("expected an error for {text:?}, got {p:?}"),
+            Err(e) => e,
+        }
+    }
+
+    #[test]
+    fn defaults_are_valid_and_round_trip() {
+        let p = Params::default();
+        p.validate().unwrap();
+        let text = p.to_commented_toml();
+        assert!(text.starts_with("# Parameters of the tectonic planet generator"));
+        assert!(text.contains("radius_km = 6370.0\n"), "{text}");
+        assert!(text.contains("coefficient_per_km = 1.3e-5\n"), "{text}");
+        assert!(
+            text.contains("# Planet radius R (paper Appendix A). [km] (range 100.0..100000.0)\n"),
+            "{text}"
+        );
+        assert!(
+            text.contains("# Initial number of plates. (range 2..2000)\n"),
+            "{text}"
+        );
+        assert!(text.contains("(range 0..9223372036854775807)"), "{text}");
+        let back = Params::from_toml_str(&text).unwrap();
+        assert_eq!(back, p);
+        // Every key is present in the printout.
+        for spec in Params::schema() {
+            assert!(
+                text.contains(&format!("\n{} = ", spec.name)),
+                "{}",
+                spec.key
+            );
+            assert!(
+                text.contains(&format!("\n[{}]\n", spec.section)),
+                "{}",
+                spec.section
+            );
+        }
+    }
+
+    #[test]
+    fn non_default_values_round_trip_exactly() {
+        let mut p = Params::default();
+        p.collision.coefficient_per_km = 0.1 + 0.2; // 0.30000000000000004
+        p.planet.radius_km = 1.0e5;
+        p.planet.seed = 9_223_372_036_854_775_807;
+        p.init.continental_elevation_km = -1.234_567_890_123_456_7;
+        p.resample.fragment_min_area_km2 = 1e9;
+        p.ocean.damping_mm_per_yr = 5e-324; // smallest subnormal
+        p.validate().unwrap();
+        let back = Params::from_toml_str(&p.to_commented_toml()).unwrap();
+        assert_eq!(back, p);
+    }
+
+    #[test]
+    fn partial_file_overrides_only_its_keys() {
+        let p = Params::from_toml_str("[ocean]\nridge_elevation_km = -2.5\n[init]\nplates = 12\n")
+            .unwrap();
+        let mut expected = Params::default();
+        expected.ocean.ridge_elevation_km = -2.5;
+        expected.init.plates = 12;
+        assert_eq!(p, expected);
+        assert_eq!(Params::from_toml_str("").unwrap(), Params::default());
+        // Dotted keys at top level are ordinary TOML too.
+        let p = Params::from_toml_str("time.time_step_my = 1\n").unwrap();
+        assert_eq!(p.time.time_step_my, 1.0);
+    }
+
+    #[test]
+    fn integer_accepted_for_float_field() {
+        let p = Params::from_toml_str("[planet]\nradius_km = 3000\n").unwrap();
+        assert_eq!(p.planet.radius_km, 3000.0);
+    }
+
+    #[test]
+    fn malformed_toml_reports_position() {
+        let e = err("[planet]\nradius_km = = 3\n");
+        assert!(
+            matches!(e, ParamError::MalformedToml { line: Some(2), .. }),
+            "{e:?}"
+        );
+        let msg = e.to_string();
+        assert!(msg.starts_with("malformed TOML: "), "{msg}");
+        assert!(msg.contains("column 13"), "{msg}");
+        assert!(
+            matches!(
+                e,
+                ParamError::MalformedToml {
+                    column: Some(13),
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+        assert!(msg.contains("line 2"), "{msg}");
+        // Duplicate keys are a TOML error too.
+        let e = err("[init]\nplates = 3\nplates = 4\n");
+        assert!(matches!(e, ParamError::MalformedToml { .. }), "{e:?}");
+    }
+
+    #[test]
+    fn unknown_key_with_typo_suggests() {
+        let e = err("[ocean]\nridge_elevaton_km = -1\n");
+        assert!(
+            matches!(&e, ParamError::UnknownKey { key, suggestion: Some(s) } if key == "ocean.ridge_elevaton_km" && s == "ocean.ridge_elevation_km"),
+            "{e:?}"
+        );
+        assert_eq!(
+            e.to_string(),
+            "unknown parameter \"ocean.ridge_elevaton_km\"; did you mean \"ocean.ridge_elevation_km\"?"
+        );
+    }
+
+    #[test]
+    fn key_in_wrong_section_suggests_right_full_key() {
+        let e = err("[planet]\nplates = 10\n");
+        assert_eq!(
+            e.to_string(),
+            "unknown parameter \"planet.plates\"; did you mean \"init.plates\"?"
+        );
+        let e = err("[ocean]\nmax_elevation_km = 3\n");
+        assert!(
+            e.to_string()
+                .contains("did you mean \"continent.max_elevation_km\"?"),
+            "{e}"
+        );
+        // Top-level key without a section.
+        let e = err("samples = 1000\n");
+        assert_eq!(
+            e.to_string(),
+            "unknown parameter \"samples\"; did you mean \"planet.samples\"?"
+        );
+        // Via set() as well.
+        let e = Params::default()
+            .set("time.seed", ParamValue::Int(3))
+            .unwrap_err();
+        assert!(
+            e.to_string().contains("did you mean \"planet.seed\"?"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn unknown_key_far_from_anything_has_no_suggestion() {
+        let e = err("[ocean]\nzzzzzzzzzzzzzzzzzzzzz = 1\n");
+        assert!(
+            matches!(
+                &e,
+                ParamError::UnknownKey {
+                    suggestion: None,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+        assert_eq!(
+            e.to_string(),
+            "unknown parameter \"ocean.zzzzzzzzzzzzzzzzzzzzz\""
+        );
+    }
+
+    #[test]
+    fn unknown_section_suggests() {
+        let e = err("[oceans]\nridge_elevation_km = -1\n");
+        assert!(
+            matches!(&e, ParamError::UnknownSection { section, suggestion: Some(s) } if section == "oceans" && s == "ocean"),
+            "{e:?}"
+        );
+        assert_eq!(
+            e.to_string(),
+            "unknown parameter section [oceans]; did you mean \"ocean\"?"
+        );
+        let e = err("[qwertyuiop]\n");
+        assert_eq!(e.to_string(), "unknown parameter section [qwertyuiop]");
+    }
+
+    #[test]
+    fn section_given_as_value_is_rejected() {
+        let e = err("ocean = 3\n");
+        assert!(
+            matches!(&e, ParamError::SectionNotTable { section, .. } if section == "ocean"),
+            "{e:?}"
+        );
+        assert!(e.to_string().contains("integer 3"), "{e}");
+    }
+
+    #[test]
+    fn wrong_types_are_rejected() {
+        let e = err("[planet]\nradius_km = \"big\"\n");
+        assert!(
+            matches!(&e, ParamError::WrongType { key, expected: ParamKind::Float, .. } if key == "planet.radius_km"),
+            "{e:?}"
+        );
+        assert_eq!(
+            e.to_string(),
+            "parameter \"planet.radius_km\" must be a number, got string \"big\""
+        );
+        let e = err("[planet]\nradius_km = { a = 1 }\n");
+        assert!(e.to_string().contains("got a table"), "{e}");
+        let e = err("[init]\nplates = [1, 2]\n");
+        assert!(
+            matches!(
+                &e,
+                ParamError::WrongType {
+                    expected: ParamKind::Int,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+        let e = err("[init]\nplates = true\n");
+        assert!(
+            e.to_string().contains("\"init.plates\"") && e.to_string().contains("boolean true"),
+            "{e}"
+        );
+        // A sub-table inside a section.
+        let e = err("[ocean.ridge_elevation_km]\nx = 1\n");
+        assert!(
+            matches!(&e, ParamError::WrongType { key, .. } if key == "ocean.ridge_elevation_km"),
+            "{e:?}"
+        );
+    }
+
+    #[test]
+    fn float_for_int_field() {
+        let e = err("[init]\nplates = 40.5\n");
+        assert!(
+            matches!(&e, ParamError::NotIntegral { key, value } if key == "init.plates" && *value == 40.5),
+            "{e:?}"
+        );
+        assert_eq!(
+            e.to_string(),
+            "parameter \"init.plates\" must be an integer, got 40.5"
+        );
+        // Integral floats are accepted.
+        let p = Params::from_toml_str("[init]\nplates = 30.0\n").unwrap();
+        assert_eq!(p.init.plates, 30);
+        let mut p = Params::default();
+        p.set("init.plates", ParamValue::Float(25.0)).unwrap();
+        assert_eq!(p.init.plates, 25);
+        assert!(matches!(
+            p.set("init.plates", ParamValue::Float(1e30)),
+            Err(ParamError::OutOfRange { .. })
+        ));
+    }
+
+    #[test]
+    fn negative_integer_rejected() {
+        let e = err("[planet]\nseed = -3\n");
+        assert!(
+            matches!(&e, ParamError::Negative { key, value } if key == "planet.seed" && value == "-3"),
+            "{e:?}"
+        );
+        assert_eq!(
+            e.to_string(),
+            "parameter \"planet.seed\" must be a non-negative integer, got -3"
+        );
+        let e = Params::default()
+            .set("planet.seed", ParamValue::Float(-2.0))
+            .unwrap_err();
+        assert!(matches!(e, ParamError::Negative { .. }), "{e:?}");
+    }
+
+    #[test]
+    fn non_finite_rejected() {
+        for (text, shown) in [
+            ("nan", "nan"),
+            ("inf", "inf"),
+            ("-inf", "-inf"),
+            ("+inf", "inf"),
+        ] {
+            let e = err(&format!("[planet]\nradius_km = {text}\n"));
+            assert!(
+                matches!(&e, ParamError::NonFinite { key, .. } if key == "planet.radius_km"),
+                "{e:?}"
+            );
+            assert_eq!(
+                e.to_string(),
+                format!("parameter \"planet.radius_km\" = {shown} is not a finite number")
+            );
+        }
+        let e = err("[init]\nplates = nan\n");
+        assert!(
+            matches!(&e, ParamError::NonFinite { key, .. } if key == "init.plates"),
+            "{e:?}"
+        );
+        let mut p = Params::default();
+        assert!(matches!(
+            p.set("time.time_step_my", ParamValue::Float(f64::NAN)),
+            Err(ParamError::NonFinite { .. })
+        ));
+        assert_eq!(p, Params::default());
+        p.ocean.damping_mm_per_yr = f64::INFINITY;
+        assert!(matches!(p.validate(), Err(ParamError::NonFinite { .. })));
+    }
+
+    #[test]
+    fn out_of_range() {
+        let e = err("[init]\nplates = 0\n");
+        assert!(
+            matches!(&e, ParamError::OutOfRange { key, value: ParamValue::Int(0), .. } if key == "init.plates"),
+            "{e:?}"
+        );
+        assert_eq!(
+            e.to_string(),
+            "parameter \"init.plates\" = 0 is out of range: allowed 2..=2000"
+        );
+        let e = err("[planet]\nradius_km = 99.5\n");
+        assert_eq!(
+            e.to_string(),
+            "parameter \"planet.radius_km\" = 99.5 is out of range: allowed 100.0..=100000.0"
+        );
+    }
+
+    #[test]
+    fn range_bounds_are_inclusive_and_exact() {
+        // Max seed is accepted (TOML integers are i64, so this is the largest writable).
+        let p = Params::from_toml_str("[planet]\nseed = 9223372036854775807\n").unwrap();
+        assert_eq!(p.planet.seed, 9_223_372_036_854_775_807);
+        let mut p = Params::default();
+        // One past the int max is rejected exactly, although it equals the max as f64.
+        let e = p
+            .set("planet.seed", ParamValue::Int(9_223_372_036_854_775_808))
+            .unwrap_err();
+        assert!(
+            e.to_string().contains("allowed 0..=9223372036854775807"),
+            "{e}"
+        );
+        p.set("planet.sample_jitter", ParamValue::Float(0.9))
+            .unwrap();
+        p.set("planet.sample_jitter", ParamValue::Float(0.0))
+            .unwrap();
+        assert!(
+            p.set(
+                "planet.sample_jitter",
+                ParamValue::Float(0.900_000_000_000_000_1)
+            )
+            .is_err()
+        );
+        assert!(
+            p.set("planet.sample_jitter", ParamValue::Float(-1e-300))
+                .is_err()
+        );
+        p.init.plates = 1;
+        assert!(matches!(p.validate(), Err(ParamError::OutOfRange { .. })));
+    }
+
+    #[test]
+    fn cross_field_plates_vs_samples() {
+        let e = err("[planet]\nsamples = 1000\n[init]\nplates = 51\n");
+        assert!(
+            matches!(
+                e,
+                ParamError::TooManyPlates {
+                    plates: 51,
+                    samples: 1000,
+                    max_plates: 50
+                }
+            ),
+            "{e:?}"
+        );
+        let msg = e.to_string();
+        assert!(
+            msg.contains("init.plates = 51")
+                && msg.contains("planet.samples = 1000")
+                && msg.contains("every plate needs"),
+            "{msg}"
+        );
+        Params::from_toml_str("[planet]\nsamples = 1000\n[init]\nplates = 50\n").unwrap();
+    }
+
+    #[test]
+    fn cross_field_ocean_order() {
+        let e = err("[ocean]\nabyssal_elevation_km = -0.5\n");
+        assert!(matches!(e, ParamError::OceanElevationOrder { .. }), "{e:?}");
+        assert!(e.to_string().contains("-10.0 < -0.5 < -1.0 < 0"), "{e}");
+        let e = err("[ocean]\nridge_elevation_km = 0\n");
+        assert!(matches!(e, ParamError::OceanElevationOrder { .. }), "{e:?}");
+        let e = err("[ocean]\ntrench_elevation_km = -6\n");
+        assert!(matches!(e, ParamError::OceanElevationOrder { .. }), "{e:?}");
+        Params::from_toml_str("[ocean]\ntrench_elevation_km = -6.01\n").unwrap();
+    }
+
+    #[test]
+    fn cross_field_resample_interval() {
+        let e = err("[resample]\nmin_interval_steps = 61\n");
+        assert!(
+            matches!(e, ParamError::ResampleInterval { min: 61, max: 60 }),
+            "{e:?}"
+        );
+        assert!(
+            e.to_string().contains("resample.min_interval_steps = 61"),
+            "{e}"
+        );
+        Params::from_toml_str("[resample]\nmin_interval_steps = 60\n").unwrap();
+    }
+
+    #[test]
+    fn get_and_set_each_kind() {
+        let mut p = Params::default();
+        assert_eq!(p.get("planet.radius_km"), Some(ParamValue::Float(6370.0)));
+        assert_eq!(p.get("init.plates"), Some(ParamValue::Int(40)));
+        assert_eq!(p.get("nope.nope"), None);
+        p.set("planet.radius_km", ParamValue::Float(1000.5))
+            .unwrap();
+        assert_eq!(p.planet.radius_km, 1000.5);
+        p.set("planet.radius_km", ParamValue::Int(2000)).unwrap();
+        assert_eq!(p.get("planet.radius_km"), Some(ParamValue::Float(2000.0)));
+        p.set("init.plates", ParamValue::Int(7)).unwrap();
+        assert_eq!(p.init.plates, 7);
+        let e = p.set("init.plates", ParamValue::Bool(true)).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                ParamError::WrongType {
+                    expected: ParamKind::Int,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+        assert!(matches!(
+            p.set("init.plates", ParamValue::Float(7.5)),
+            Err(ParamError::NotIntegral { .. })
+        ));
+        assert_eq!(p.init.plates, 7);
+        // Every schema key is gettable and settable to its default.
+        for spec in Params::schema() {
+            assert_eq!(
+                Params::default().get(spec.key),
+                Some(spec.default),
+                "{}",
+                spec.key
+            );
+            p.set(spec.key, spec.default).unwrap();
+        }
+        assert_eq!(p, Params::default());
+        // Bool values: display, and a bool for a float field is a type error.
+        assert_eq!(ParamValue::Bool(true).to_string(), "true");
+        assert!(matches!(
+            p.set("time.time_step_my", ParamValue::Bool(false)),
+            Err(ParamError::WrongType { .. })
+        ));
+        let bool_spec = ParamSpec {
+            key: "x.flag",
+            section: "x",
+            name: "flag",
+            kind: ParamKind::Bool,
+            unit: "",
+            doc: "",
+            default: ParamValue::Bool(false),
+            min: 0.0,
+            max: 1.0,
+        };
+        let bounds = (ParamValue::Bool(false), ParamValue::Bool(true));
+        assert_eq!(
+            check_value(&bool_spec, bounds, ParamValue::Bool(true)).unwrap(),
+            ParamValue::Bool(true)
+        );
+        assert!(check_value(&bool_spec, bounds, ParamValue::Int(1)).is_err());
+    }
+
+    #[test]
+    fn schema_is_consistent() {
+        let schema = Params::schema();
+        assert_eq!(schema.len(), 37);
+        assert_eq!(schema.len(), BOUNDS.len());
+        let mut seen = HashSet::new();
+        for (spec, (lo, hi)) in schema.iter().zip(BOUNDS) {
+            assert!(seen.insert(spec.key), "duplicate key {}", spec.key);
+            assert_eq!(spec.key, format!("{}.{}", spec.section, spec.name));
+            assert!(spec.min <= spec.max, "{}", spec.key);
+            assert!(!spec.doc.is_empty(), "{}", spec.key);
+            let d = match spec.default {
+                ParamValue::Float(x) => x,
+                ParamValue::Int(n) => n as f64,
+                ParamValue::Bool(b) => f64::from(u8::from(b)),
+            };
+            assert!(
+                spec.min <= d && d <= spec.max,
+                "default of {} out of range",
+                spec.key
+            );
+            check_value(spec, (*lo, *hi), spec.default).unwrap();
+        }
+        assert_eq!(schema[0].key, "planet.radius_km");
+        assert_eq!(schema[36].key, "resample.fragment_min_area_km2");
+        assert_eq!(SECTIONS.len(), 10);
+    }
+
+    #[test]
+    fn levenshtein_basics() {
+        assert_eq!(levenshtein("", ""), 0);
+        assert_eq!(levenshtein("abc", ""), 3);
+        assert_eq!(levenshtein("kitten", "sitting"), 3);
+        assert_eq!(levenshtein("ε_o", "e_o"), 1);
+        assert_eq!(suggest_threshold("ab"), 2);
+        assert_eq!(suggest_threshold("0123456789abcdef"), 4);
+    }
+
+    #[test]
+    fn load_errors_name_the_path() {
+        let dir = std::env::temp_dir().join(format!("params_test_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let missing = dir.join("missing.toml");
+        let e = Params::load(&missing).unwrap_err();
+        assert!(matches!(e, ParamError::FileNotFound { .. }), "{e:?}");
+        assert!(e.to_string().contains("missing.toml"), "{e}");
+        let e = Params::load(&dir).unwrap_err();
+        assert!(matches!(e, ParamError::IsDirectory { .. }), "{e:?}");
+        assert!(e.to_string().contains(&dir.display().to_string()), "{e}");
+        let bad = dir.join("binary.toml");
+        std::fs::write(&bad, [0xff_u8, 0xfe, 0x00]).unwrap();
+        let e = Params::load(&bad).unwrap_err();
+        assert!(matches!(e, ParamError::Unreadable { .. }), "{e:?}");
+        assert!(e.to_string().contains("binary.toml"), "{e}");
+        let good = dir.join("good.toml");
+        std::fs::write(&good, "[rifting]\nfrequency_per_my = 0.5\n").unwrap();
+        assert_eq!(Params::load(&good).unwrap().rifting.frequency_per_my, 0.5);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn hostile_inputs_do_not_panic() {
+        let long_key = "a".repeat(10_000);
+        for text in [
+            "\u{0}".to_string(),
+            "[[planet]]\nradius_km = 1\n".to_string(),
+            "[planet]\nradius_km = 1979-05-27\n".to_string(),
+            format!("[ocean]\n{long_key} = 1\n"),
+            format!("[{long_key}]\n"),
+            "[planet]\nsamples = 99999999999999999999\n".to_string(),
+            "[planet]\nsamples = 1e300\n".to_string(),
+            "[planet]\nsamples = -0.0\n".to_string(),
+        ] {
+            let _ = Params::from_toml_str(&text);
+        }
+        // -0.0 is integral and not negative: it is 0, then out of range.
+        assert!(matches!(
+            err("[planet]\nsamples = -0.0\n"),
+            ParamError::OutOfRange { .. }
+        ));
+    }
+
+    #[test]
+    fn serde_derives_work() {
+        let p = Params::default();
+        let text = toml::to_string(&p).unwrap();
+        let back: Params = toml::from_str(&text).unwrap();
+        assert_eq!(back, p);
+    }
+}

@@ -1,0 +1,126 @@
+//! The run summary (`summary.json`) and the crust sampler that maps and exports read.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::SphereMesh;
+use crate::io::maps::{MapSample, SphereField};
+use crate::resources::{Crust, CrustType};
+use crate::simulation::Simulation;
+
+/// Elevation percentiles by area, metres.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ElevationSummary {
+    /// Lowest elevation.
+    pub min: f64,
+    /// 1st percentile by area.
+    pub p01: f64,
+    /// Median by area.
+    pub p50: f64,
+    /// 99th percentile by area.
+    pub p99: f64,
+    /// Highest elevation.
+    pub max: f64,
+}
+
+/// What `summary.json` holds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// Random seed.
+    pub seed: u64,
+    /// Number of samples.
+    pub samples: usize,
+    /// Number of plates at the end.
+    pub plates: usize,
+    /// Steps taken.
+    pub steps: u64,
+    /// Simulated time, My.
+    pub time_my: f64,
+    /// Fraction of the area above sea level.
+    pub land_fraction: f64,
+    /// Fraction of the area of continental crust.
+    pub continental_fraction: f64,
+    /// Elevation percentiles, metres.
+    pub elevation_m: ElevationSummary,
+    /// Median wall time per system set and for one resampling, milliseconds.
+    pub timings_ms: BTreeMap<String, f64>,
+    /// Global resamplings performed.
+    pub resamplings: u64,
+}
+
+/// Area-weighted elevation percentiles of a crust, metres.
+pub fn elevation_summary(mesh: &SphereMesh, crust: &Crust) -> ElevationSummary {
+    let mut pairs: Vec<(f32, f64)> = crust.elevation_km.iter().copied().zip(mesh.area_km2.iter().copied()).collect();
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = pairs.iter().map(|p| p.1).sum();
+    let quantile = |q: f64| -> f64 {
+        let target = q * total;
+        let mut acc = 0.0;
+        for &(z, a) in &pairs {
+            acc += a;
+            if acc >= target {
+                return z as f64 * 1000.0;
+            }
+        }
+        pairs.last().map_or(0.0, |p| p.0 as f64 * 1000.0)
+    };
+    ElevationSummary {
+        min: pairs.first().map_or(0.0, |p| p.0 as f64 * 1000.0),
+        p01: quantile(0.01),
+        p50: quantile(0.5),
+        p99: quantile(0.99),
+        max: pairs.last().map_or(0.0, |p| p.0 as f64 * 1000.0),
+    }
+}
+
+/// Builds the summary of `sim` from its resampled crust `view`.
+pub fn summarize(sim: &Simulation, view: &Crust) -> Summary {
+    let mesh = sim.mesh();
+    let stats = crate::systems::diagnostics::crust_stats(mesh, view);
+    let mut plates: Vec<u32> = view.plate.clone();
+    plates.sort_unstable();
+    plates.dedup();
+    let timings = sim.timings();
+    let timings_ms = timings.names().filter_map(|n| timings.median_ms(n).map(|m| (n.to_string(), m))).collect();
+    Summary {
+        seed: sim.params().planet.seed,
+        samples: mesh.len(),
+        plates: plates.len(),
+        steps: sim.clock().step,
+        time_my: sim.clock().time_my,
+        land_fraction: stats.land_fraction,
+        continental_fraction: stats.continental_fraction,
+        elevation_m: elevation_summary(mesh, view),
+        timings_ms,
+        resamplings: sim.clock().resamplings,
+    }
+}
+
+/// Samples a crust on the reference mesh at any direction (barycentric for scalars, nearest
+/// vertex for categories), for maps.
+pub struct CrustSampler<'a> {
+    /// The mesh.
+    pub mesh: &'a SphereMesh,
+    /// A crust in the reference (world) frame, e.g. from `Simulation::resampled_crust`.
+    pub crust: &'a Crust,
+}
+
+impl SphereField for CrustSampler<'_> {
+    fn sample(&self, dir: [f64; 3]) -> MapSample {
+        let q = glam::DVec3::from_array(dir).normalize();
+        let loc = self.mesh.locate(q);
+        let t = self.mesh.triangles[loc.triangle as usize];
+        let w = loc.weights;
+        let lerp = |f: &[f32]| {
+            (w[0] * f[t[0] as usize] as f64 + w[1] * f[t[1] as usize] as f64 + w[2] * f[t[2] as usize] as f64) as f32
+        };
+        let d = t[loc.dominant_corner()] as usize;
+        MapSample {
+            elevation_m: lerp(&self.crust.elevation_km) * 1000.0,
+            plate: self.crust.plate[d],
+            continental: self.crust.crust_type[d] == CrustType::Continental,
+            age_my: lerp(&self.crust.age_my),
+        }
+    }
+}

@@ -1,0 +1,249 @@
+//! The step schedule and its plugins. One step is one run of the [`TectonicStep`] schedule, whose
+//! shape is set once, here, as a chain of system sets:
+//!
+//! 1. [`TectonicSystems::Collision`]: continental collisions (discrete events).
+//! 2. [`TectonicSystems::Drift`]: plates turn about their Euler poles.
+//! 3. [`TectonicSystems::Subduction`]: uplift at converging boundaries.
+//! 4. [`TectonicSystems::Erosion`]: continental erosion, oceanic damping, sediment accretion.
+//! 5. [`TectonicSystems::SlabPull`]: subducting plates turn toward their fronts.
+//! 6. [`TectonicSystems::Rifting`]: plates break apart.
+//! 7. [`TectonicSystems::Aging`]: crust and orogenies age.
+//! 8. [`TectonicSystems::Resample`]: global resampling when due, in three chained sub-sets
+//!    ([`ResampleSystems::Interpolate`], [`ResampleSystems::FillGaps`],
+//!    [`ResampleSystems::Rebuild`]).
+//! 9. [`TectonicSystems::Diagnostics`]: statistics and checks.
+//!
+//! Each phenomenon is a plugin that puts its systems in its set, registers itself in
+//! [`Phenomena`](crate::resources::Phenomena) and guards its systems with
+//! [`phenomenon_enabled`](crate::resources::phenomenon_enabled), so it can be switched off at
+//! run time. [`TectonicPlugins`] groups the built-in ones; a user can `disable` one and `add` a
+//! replacement.
+
+use std::time::Instant;
+
+use bevy_app::{App, Plugin, PluginGroup, PluginGroupBuilder};
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::{ScheduleLabel, SingleThreadedExecutor};
+
+use crate::resources::{Phenomena, ResampleRequest, SimClock, StepTimings, phenomenon_enabled};
+use crate::systems::{aging, diagnostics, drift, erosion, oceanic_crust, resample};
+
+/// The schedule that runs one tectonic time step.
+#[derive(ScheduleLabel, Clone, Debug, PartialEq, Eq, Hash)]
+pub struct TectonicStep;
+
+/// The ordered phases of a step (see the module documentation).
+#[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum TectonicSystems {
+    /// Continental collisions.
+    Collision,
+    /// Plate drift.
+    Drift,
+    /// Subduction uplift.
+    Subduction,
+    /// Erosion, damping, sediment accretion.
+    Erosion,
+    /// Slab pull.
+    SlabPull,
+    /// Plate rifting.
+    Rifting,
+    /// Crust aging.
+    Aging,
+    /// Global resampling.
+    Resample,
+    /// Statistics and checks.
+    Diagnostics,
+}
+
+impl TectonicSystems {
+    /// Every set, in step order.
+    pub const ALL: [TectonicSystems; 9] = [
+        Self::Collision,
+        Self::Drift,
+        Self::Subduction,
+        Self::Erosion,
+        Self::SlabPull,
+        Self::Rifting,
+        Self::Aging,
+        Self::Resample,
+        Self::Diagnostics,
+    ];
+    /// Lower-case name used in timings and listings.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Collision => "collision",
+            Self::Drift => "drift",
+            Self::Subduction => "subduction",
+            Self::Erosion => "erosion",
+            Self::SlabPull => "slab_pull",
+            Self::Rifting => "rifting",
+            Self::Aging => "aging",
+            Self::Resample => "resample",
+            Self::Diagnostics => "diagnostics",
+        }
+    }
+}
+
+/// The phases of a resampling, chained inside [`TectonicSystems::Resample`].
+#[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ResampleSystems {
+    /// Locate samples in the moved plates and interpolate; find gaps.
+    Interpolate,
+    /// Gap fillers (new oceanic crust) write the gap samples.
+    FillGaps,
+    /// Install the new crust and rebuild the plates.
+    Rebuild,
+}
+
+/// Timing marks around each set (internal).
+#[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+enum TimingMark {
+    Begin(TectonicSystems),
+    End(TectonicSystems),
+}
+
+/// Registers a phenomenon from a plugin's `build`.
+pub trait PhenomenonAppExt {
+    /// Adds `name` to the [`Phenomena`] registry (enabled), in `set`.
+    fn register_phenomenon(&mut self, name: &'static str, set: TectonicSystems, description: &'static str) -> &mut Self;
+}
+
+impl PhenomenonAppExt for App {
+    fn register_phenomenon(&mut self, name: &'static str, set: TectonicSystems, description: &'static str) -> &mut Self {
+        self.init_resource::<Phenomena>();
+        self.world_mut().resource_mut::<Phenomena>().register(name, set, description);
+        self
+    }
+}
+
+/// The schedule itself: the [`TectonicStep`] schedule, its chained sets, the timing marks and
+/// the core resources. Always present; not a phenomenon.
+pub struct TectonicSchedulePlugin;
+
+impl Plugin for TectonicSchedulePlugin {
+    fn build(&self, app: &mut App) {
+        let mut schedule = Schedule::new(TectonicStep);
+        schedule.set_executor(SingleThreadedExecutor::new());
+        app.add_schedule(schedule);
+        app.init_resource::<Phenomena>()
+            .init_resource::<StepTimings>()
+            .init_resource::<SimClock>()
+            .init_resource::<ResampleRequest>()
+            .init_resource::<resample::ResampleWork>()
+            .init_resource::<diagnostics::CrustHealth>()
+            .init_resource::<crate::resources::CrustStats>();
+        for set in TectonicSystems::ALL {
+            app.configure_sets(TectonicStep, (TimingMark::Begin(set), set, TimingMark::End(set)).chain());
+            app.add_systems(TectonicStep, begin_timing.in_set(TimingMark::Begin(set)));
+            let name = set.name();
+            app.add_systems(
+                TectonicStep,
+                (move |mut t: ResMut<StepTimings>| end_timing(&mut t, name)).in_set(TimingMark::End(set)),
+            );
+        }
+        for pair in TectonicSystems::ALL.windows(2) {
+            app.configure_sets(TectonicStep, TimingMark::End(pair[0]).before(TimingMark::Begin(pair[1])));
+        }
+        app.configure_sets(
+            TectonicStep,
+            (ResampleSystems::Interpolate, ResampleSystems::FillGaps, ResampleSystems::Rebuild)
+                .chain()
+                .in_set(TectonicSystems::Resample),
+        );
+        app.add_systems(TectonicStep, advance_clock.in_set(TectonicSystems::Aging));
+    }
+}
+
+fn begin_timing(mut t: ResMut<StepTimings>) {
+    t.started = Some(Instant::now());
+}
+
+fn end_timing(t: &mut StepTimings, name: &'static str) {
+    if let Some(s) = t.started.take() {
+        t.record(name, s.elapsed());
+    }
+}
+
+/// Advances the clock by one step (runs in every step, before resampling decides).
+fn advance_clock(mut clock: ResMut<SimClock>, params: Res<crate::io::params::Params>) {
+    clock.step += 1;
+    clock.time_my += params.time.time_step_my;
+    clock.steps_since_resample += 1;
+}
+
+macro_rules! phenomenon_plugin {
+    ($(#[$doc:meta])* $plugin:ident, $name:literal, $set:expr, $desc:literal, $systems:expr) => {
+        $(#[$doc])*
+        #[derive(Default)]
+        pub struct $plugin;
+        impl Plugin for $plugin {
+            fn build(&self, app: &mut App) {
+                app.register_phenomenon($name, $set, $desc);
+                app.add_systems(TectonicStep, $systems.run_if(phenomenon_enabled($name)));
+            }
+        }
+    };
+}
+
+phenomenon_plugin!(
+    /// Plate drift: each plate turns about its Euler pole (phenomenon `drift`).
+    DriftPlugin, "drift", TectonicSystems::Drift, "plates turn about their Euler poles",
+    drift::drift_plates.in_set(TectonicSystems::Drift)
+);
+phenomenon_plugin!(
+    /// Continental erosion, oceanic damping and sediment accretion (phenomenon `erosion`).
+    ErosionPlugin, "erosion", TectonicSystems::Erosion, "continental erosion, oceanic damping, sediment accretion",
+    erosion::erode.in_set(TectonicSystems::Erosion)
+);
+phenomenon_plugin!(
+    /// Crust and orogeny aging (phenomenon `aging`).
+    AgingPlugin, "aging", TectonicSystems::Aging, "crust and orogeny ages grow by the time step",
+    aging::age_crust.in_set(TectonicSystems::Aging)
+);
+phenomenon_plugin!(
+    /// New oceanic crust with a ridge in the gaps between diverging plates (phenomenon
+    /// `oceanic_crust`); without it, gaps are filled by stretching the nearest plate.
+    OceanicCrustPlugin, "oceanic_crust", TectonicSystems::Resample, "new ocean floor and ridges in divergent gaps",
+    oceanic_crust::generate_oceanic_crust.in_set(ResampleSystems::FillGaps)
+);
+phenomenon_plugin!(
+    /// Statistics and the no-NaN check (phenomenon `diagnostics`).
+    DiagnosticsPlugin, "diagnostics", TectonicSystems::Diagnostics, "area statistics and finiteness checks",
+    diagnostics::update_diagnostics.in_set(TectonicSystems::Diagnostics)
+);
+
+/// Global resampling every 10–60 steps (adaptive) or on request (phenomenon `resample`).
+#[derive(Default)]
+pub struct ResamplePlugin;
+
+impl Plugin for ResamplePlugin {
+    fn build(&self, app: &mut App) {
+        app.register_phenomenon("resample", TectonicSystems::Resample, "global resampling onto the reference mesh");
+        app.add_systems(
+            TectonicStep,
+            (
+                resample::resample_interpolate
+                    .in_set(ResampleSystems::Interpolate)
+                    .run_if(phenomenon_enabled("resample"))
+                    .run_if(resample::resample_due),
+                resample::resample_rebuild.in_set(ResampleSystems::Rebuild),
+            ),
+        );
+    }
+}
+
+/// The built-in phenomena, in schedule order. Disable one with
+/// `TectonicPlugins.build().disable::<ErosionPlugin>()` and add your own in its place.
+pub struct TectonicPlugins;
+
+impl PluginGroup for TectonicPlugins {
+    fn build(self) -> PluginGroupBuilder {
+        PluginGroupBuilder::start::<Self>()
+            .add(DriftPlugin)
+            .add(ErosionPlugin)
+            .add(AgingPlugin)
+            .add(ResamplePlugin)
+            .add(OceanicCrustPlugin)
+            .add(DiagnosticsPlugin)
+    }
+}

@@ -1,0 +1,52 @@
+//! Wall-clock timings of each system set in recent steps, for the progress display, the
+//! summary and the viewer's schedule panel.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use bevy_ecs::prelude::*;
+
+/// How many recent samples each timing keeps.
+const HISTORY: usize = 4096;
+
+/// Durations per system set (and for resampling alone), most recent last.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct StepTimings {
+    per_set: BTreeMap<&'static str, Vec<Duration>>,
+    /// When the set being timed started.
+    pub(crate) started: Option<std::time::Instant>,
+}
+
+impl StepTimings {
+    /// Records one duration under `name`.
+    pub fn record(&mut self, name: &'static str, d: Duration) {
+        let v = self.per_set.entry(name).or_default();
+        if v.len() == HISTORY {
+            v.remove(0);
+        }
+        v.push(d);
+    }
+    /// The most recent duration recorded under `name`.
+    pub fn last(&self, name: &str) -> Option<Duration> {
+        self.per_set.get(name).and_then(|v| v.last().copied())
+    }
+    /// Median of the recorded durations under `name`, milliseconds.
+    pub fn median_ms(&self, name: &str) -> Option<f64> {
+        let v = self.per_set.get(name)?;
+        if v.is_empty() {
+            return None;
+        }
+        let mut ms: Vec<f64> = v.iter().map(|d| d.as_secs_f64() * 1e3).collect();
+        ms.sort_by(f64::total_cmp);
+        let n = ms.len();
+        Some(if n % 2 == 1 { ms[n / 2] } else { 0.5 * (ms[n / 2 - 1] + ms[n / 2]) })
+    }
+    /// Names with recorded timings.
+    pub fn names(&self) -> impl Iterator<Item = &'static str> + '_ {
+        self.per_set.keys().copied()
+    }
+    /// Forgets everything recorded.
+    pub fn clear(&mut self) {
+        self.per_set.clear();
+    }
+}

@@ -1,0 +1,288 @@
+//! The library entry point: a [`Simulation`] owns the ECS app (world + step schedule) and steps
+//! it. Rust users build one from [`Params`], optionally with their own plugin group, and call
+//! [`Simulation::step`] or [`Simulation::run_for`].
+//!
+//! ```no_run
+//! use tectonic_planets::prelude::*;
+//!
+//! let mut params = Params::default();
+//! params.planet.samples = 20_000;
+//! let mut sim = Simulation::new(params)?;
+//! sim.run_for(100.0)?; // 100 My = 50 steps of 2 My
+//! println!("land fraction {:.2}", sim.stats().land_fraction);
+//! # Ok::<(), tectonic_planets::SimError>(())
+//! ```
+
+use std::time::Instant;
+
+use bevy_app::{App, PluginGroup};
+use bevy_ecs::prelude::*;
+
+use crate::components::{Plate, PlateBounds, PlateFrame, PlateMesh, PlateMotion, PlateStats};
+use crate::geometry::{MeshError, SphereMesh};
+use crate::io::params::{ParamError, Params};
+use crate::plugins::{TectonicPlugins, TectonicSchedulePlugin, TectonicStep};
+use crate::random::StableHasher;
+use crate::resources::{
+    Crust, CrustStats, NextPlateId, NonFinite, Phenomena, PhenomenonInfo, PlateTable, ResampleRequest, SimClock,
+    StepTimings,
+};
+use crate::systems::diagnostics::{CrustHealth, crust_stats};
+use crate::systems::{init, oceanic_crust, resample};
+
+/// Why a simulation could not be built or stepped.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// A parameter is invalid.
+    #[error(transparent)]
+    Params(#[from] ParamError),
+    /// The mesh could not be built.
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    /// A non-finite value entered the crust (a bug; the step that made it is named).
+    #[error("step {step}: {source}")]
+    NonFinite {
+        /// Step at which it was found.
+        step: u64,
+        /// Where.
+        source: NonFinite,
+    },
+    /// A phenomenon name that no plugin registered.
+    #[error("{0}")]
+    UnknownPhenomenon(String),
+    /// A time or count argument that makes no sense.
+    #[error("{0}")]
+    BadArgument(String),
+}
+
+/// A running planet: the ECS world and its step schedule.
+pub struct Simulation {
+    app: App,
+}
+
+impl Simulation {
+    /// A new planet from `params` with the built-in phenomena ([`TectonicPlugins`]).
+    pub fn new(params: Params) -> Result<Self, SimError> {
+        Self::with_plugins(params, TectonicPlugins)
+    }
+
+    /// A new planet from `params` with the given plugin group (for example
+    /// `TectonicPlugins.build().disable::<ErosionPlugin>().add(MyErosion)`).
+    pub fn with_plugins(params: Params, plugins: impl PluginGroup) -> Result<Self, SimError> {
+        params.validate()?;
+        let mut timings = StepTimings::default();
+        let t0 = Instant::now();
+        let mesh = init::reference_mesh(&params)?;
+        timings.record("mesh", t0.elapsed());
+        let t1 = Instant::now();
+        let (crust, plates) = init::initial_planet(&mesh, &params);
+        let next_id = plates.iter().map(|p| p.id.0 + 1).max().unwrap_or(0);
+
+        let mut app = App::empty();
+        app.insert_resource(params).insert_resource(mesh).insert_resource(crust).insert_resource(NextPlateId(next_id));
+        app.add_plugins(TectonicSchedulePlugin);
+        app.add_plugins(plugins);
+        app.finish();
+        app.cleanup();
+        let world = app.world_mut();
+        for p in &plates {
+            world.spawn((
+                Plate { id: p.id },
+                p.motion,
+                PlateFrame::default(),
+                PlateMesh::default(),
+                PlateBounds { centroid: glam::DVec3::Z, cap_radius_rad: std::f64::consts::PI },
+                PlateStats::default(),
+            ));
+        }
+        resample::rebuild_plate_entities(world, &[]);
+        timings.record("initial_planet", t1.elapsed());
+        *world.resource_mut::<StepTimings>() = timings;
+        let mut sim = Self { app };
+        sim.refresh_stats();
+        Ok(sim)
+    }
+
+    fn refresh_stats(&mut self) {
+        let world = self.app.world_mut();
+        let plates = world.query::<&Plate>().iter(world).count();
+        let mut stats = crust_stats(world.resource::<SphereMesh>(), world.resource::<Crust>());
+        stats.plates = plates;
+        *world.resource_mut::<CrustStats>() = stats;
+    }
+
+    /// Runs one time step (one run of the [`TectonicStep`] schedule).
+    pub fn step(&mut self) -> Result<(), SimError> {
+        self.app.world_mut().run_schedule(TectonicStep);
+        let world = self.app.world();
+        if let Some(e) = world.resource::<CrustHealth>().0.clone() {
+            return Err(SimError::NonFinite { step: world.resource::<SimClock>().step, source: e });
+        }
+        Ok(())
+    }
+
+    /// Runs `n` steps.
+    pub fn run_steps(&mut self, n: u64) -> Result<(), SimError> {
+        for _ in 0..n {
+            self.step()?;
+        }
+        Ok(())
+    }
+
+    /// Number of steps that `my` million years take (rounded to the nearest step).
+    pub fn steps_for(&self, my: f64) -> Result<u64, SimError> {
+        let dt = self.params().time.time_step_my;
+        if !my.is_finite() || my < 0.0 {
+            return Err(SimError::BadArgument(format!("time {my} My is not a finite, non-negative number")));
+        }
+        Ok((my / dt).round() as u64)
+    }
+
+    /// Runs for `my` million years (rounded to whole steps).
+    pub fn run_for(&mut self, my: f64) -> Result<(), SimError> {
+        let n = self.steps_for(my)?;
+        self.run_steps(n)
+    }
+
+    /// Asks for a global resampling at the end of the next step.
+    pub fn request_resample(&mut self) {
+        self.app.world_mut().resource_mut::<ResampleRequest>().0 = true;
+    }
+
+    /// Switches a phenomenon on or off (takes effect from the next step).
+    pub fn set_enabled(&mut self, name: &str, enabled: bool) -> Result<(), SimError> {
+        self.app.world_mut().resource_mut::<Phenomena>().set_enabled(name, enabled).map_err(SimError::UnknownPhenomenon)
+    }
+
+    /// Every registered phenomenon and whether it is on.
+    pub fn phenomena(&self) -> Vec<PhenomenonInfo> {
+        self.app.world().resource::<Phenomena>().iter().cloned().collect()
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &Params {
+        self.app.world().resource::<Params>()
+    }
+    /// The reference mesh.
+    pub fn mesh(&self) -> &SphereMesh {
+        self.app.world().resource::<SphereMesh>()
+    }
+    /// The crust (in plate frames since the last resampling).
+    pub fn crust(&self) -> &Crust {
+        self.app.world().resource::<Crust>()
+    }
+    /// The clock.
+    pub fn clock(&self) -> &SimClock {
+        self.app.world().resource::<SimClock>()
+    }
+    /// Simulated time, My.
+    pub fn time_my(&self) -> f64 {
+        self.clock().time_my
+    }
+    /// Statistics of the last step.
+    pub fn stats(&self) -> &CrustStats {
+        self.app.world().resource::<CrustStats>()
+    }
+    /// Timings of recent steps.
+    pub fn timings(&self) -> &StepTimings {
+        self.app.world().resource::<StepTimings>()
+    }
+    /// The ECS world (read).
+    pub fn world(&self) -> &World {
+        self.app.world()
+    }
+    /// The ECS world (write): spawn entities, change plate motions, edit the crust.
+    pub fn world_mut(&mut self) -> &mut World {
+        self.app.world_mut()
+    }
+    /// The app, for adding plugins after construction.
+    pub fn app_mut(&mut self) -> &mut App {
+        &mut self.app
+    }
+
+    /// A snapshot of every plate's frame and motion, sorted by id.
+    pub fn plate_table(&mut self) -> PlateTable {
+        let world = self.app.world_mut();
+        let mut q = world.query::<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>();
+        PlateTable::from_iter(q.iter(world).map(|(p, m, f, b, s)| (*p, *m, *f, *b, *s)))
+    }
+
+    /// The crust as it would be after a resampling now, without changing the simulation: every
+    /// field on the reference mesh in the world frame, gaps filled with new ocean floor (when the
+    /// `oceanic_crust` phenomenon is on). This is what maps and exports show.
+    pub fn resampled_crust(&mut self) -> Crust {
+        let table = self.plate_table();
+        let ocean_on = self.app.world().resource::<Phenomena>().is_enabled("oceanic_crust");
+        let world = self.app.world();
+        let mesh = world.resource::<SphereMesh>();
+        let crust = world.resource::<Crust>();
+        let params = world.resource::<Params>();
+        let clock = world.resource::<SimClock>();
+        if clock.steps_since_resample == 0 {
+            return crust.clone();
+        }
+        let mut sources = Vec::new();
+        let mut next = Crust::default();
+        resample::locate_sources(mesh, crust, &table, &mut sources);
+        resample::interpolate(mesh, crust, &table, &sources, &mut next);
+        let gap_ids: Vec<u32> = sources.iter().enumerate().filter(|(_, s)| s.is_gap()).map(|(j, _)| j as u32).collect();
+        let gaps = resample::nearest_two_plates(mesh, &next.plate, &gap_ids);
+        resample::fill_gaps_from_nearest(&mut next, &gaps);
+        if ocean_on {
+            let elapsed = clock.steps_since_resample as f64 * params.time.time_step_my;
+            let made: Vec<_> =
+                gaps.iter().map(|g| oceanic_crust::ridge_crust(mesh, params, &next.elevation_km, elapsed, g)).collect();
+            for (g, m) in gaps.iter().zip(made) {
+                if let Some((z, age, ridge)) = m {
+                    let j = g.sample as usize;
+                    next.elevation_km[j] = z;
+                    next.age_my[j] = age;
+                    next.ridge_dir[j] = ridge;
+                    next.crust_type[j] = crate::resources::CrustType::Oceanic;
+                    next.thickness_km[j] = params.init.oceanic_thickness_km as f32;
+                    next.orogeny[j] = crate::resources::Orogeny::None;
+                    next.orogeny_age_my[j] = 0.0;
+                    next.fold_dir[j] = [0.0; 3];
+                }
+            }
+        }
+        next
+    }
+
+    /// A stable hash of the whole simulation state: crust, plates (ids, motions, frames) and
+    /// clock. Equal hashes mean bit-identical planets.
+    pub fn state_hash(&mut self) -> u64 {
+        let table = self.plate_table();
+        let world = self.app.world();
+        let mut h = StableHasher::default();
+        h.write_u64(world.resource::<Crust>().hash());
+        for p in &table.plates {
+            h.write_u64(p.id as u64);
+            for v in [p.motion.euler_pole.x, p.motion.euler_pole.y, p.motion.euler_pole.z, p.motion.angular_speed_rad_per_my] {
+                h.write_u64(v.to_bits());
+            }
+            for c in p.world_from_plate.to_cols_array() {
+                h.write_u64(c.to_bits());
+            }
+        }
+        let c = world.resource::<SimClock>();
+        h.write_u64(c.step);
+        h.write_u64(c.steps_since_resample);
+        h.finish()
+    }
+
+    /// Bytes held on the heap by the mesh, the crust, the resampling work area and the plates.
+    pub fn state_bytes(&mut self) -> usize {
+        let world = self.app.world_mut();
+        let plates: usize = world
+            .query::<&PlateMesh>()
+            .iter(world)
+            .map(|m| (m.samples.capacity() + m.triangles.capacity()) * 4)
+            .sum();
+        let work = world.resource::<resample::ResampleWork>();
+        let work_bytes = work.next.heap_bytes()
+            + work.sources.capacity() * std::mem::size_of::<resample::SampleSource>()
+            + work.gaps.capacity() * std::mem::size_of::<resample::GapSample>();
+        world.resource::<SphereMesh>().heap_bytes() + world.resource::<Crust>().heap_bytes() + work_bytes + plates
+    }
+}

@@ -1,0 +1,79 @@
+//! Continental erosion, oceanic damping and sediment accretion (paper §4.5), one pass over the
+//! crust per step.
+//!
+//! - Continental erosion: emerged continental crust loses z/z_c·ε_c·δt.
+//! - Oceanic damping: oceanic crust above the abyssal plain sinks by (1 − z/z_t)·ε_o·δt, applied
+//!   as the exact solution of that law over δt, and stops at the abyssal depth z_a (the paper's
+//!   law alone would drag all old floor toward the trench depth z_t).
+//! - Sediment accretion: oceanic crust deeper than the abyssal plain is a trench; sediment raises
+//!   it by ε_t·δt, up to z_a.
+//!
+//! Rates in mm/yr are km/My, so no unit conversion appears.
+
+use bevy_ecs::prelude::*;
+use rayon::prelude::*;
+
+use crate::io::params::Params;
+use crate::resources::{Crust, CrustType};
+
+/// New elevation of one sample after one step of erosion, damping and accretion.
+#[inline]
+pub fn erode_sample(z: f32, crust_type: CrustType, p: &ErosionRates) -> f32 {
+    let z = z as f64;
+    let out = match crust_type {
+        CrustType::Continental => {
+            if z > 0.0 {
+                z - z / p.z_c * p.erosion_km
+            } else {
+                z
+            }
+        }
+        CrustType::Oceanic => {
+            if z > p.z_a {
+                (p.z_t + (z - p.z_t) * p.damping_factor).max(p.z_a)
+            } else {
+                (z + p.sediment_km).min(p.z_a)
+            }
+        }
+    };
+    out as f32
+}
+
+/// The per-step constants of [`erode_sample`].
+#[derive(Clone, Copy, Debug)]
+pub struct ErosionRates {
+    z_c: f64,
+    z_a: f64,
+    z_t: f64,
+    erosion_km: f64,
+    damping_factor: f64,
+    sediment_km: f64,
+}
+
+impl ErosionRates {
+    /// Rates for one time step of the given parameters.
+    pub fn new(params: &Params) -> Self {
+        let dt = params.time.time_step_my;
+        let o = &params.ocean;
+        Self {
+            z_c: params.continent.max_elevation_km,
+            z_a: o.abyssal_elevation_km,
+            z_t: o.trench_elevation_km,
+            erosion_km: params.continent.erosion_mm_per_yr * dt,
+            damping_factor: (-(o.damping_mm_per_yr / o.trench_elevation_km.abs().max(1e-9)) * dt).exp(),
+            sediment_km: o.sediment_accretion_mm_per_yr * dt,
+        }
+    }
+}
+
+/// Applies one step of erosion, damping and accretion to every sample.
+pub fn erode(params: Res<Params>, mut crust: ResMut<Crust>) {
+    let rates = ErosionRates::new(&params);
+    let crust = &mut *crust;
+    crust
+        .elevation_km
+        .par_iter_mut()
+        .zip(crust.crust_type.par_iter())
+        .with_min_len(4096)
+        .for_each(|(z, &t)| *z = erode_sample(*z, t, &rates));
+}

@@ -1,0 +1,201 @@
+//! The initial planet (paper §3 "Workflow", Driftworld §3.4): plates as spherical Voronoi cells
+//! of random centroids with borders warped by low-frequency noise, continents where a noise field
+//! biased per plate is highest (exactly the target continental area), random Euler poles and
+//! speeds, and initial elevation, thickness and age by crust type.
+//!
+//! Every random draw is made per plate (from the seed and the plate number) or per position
+//! (noise evaluated at the sample's position), never per sample index, so the same seed gives
+//! the same plates, motions and continents at any resolution.
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::components::{PlateId, PlateMotion};
+use crate::geometry::{MeshError, SphereMesh, angle_between};
+use crate::io::params::Params;
+use crate::random::{fbm, hash3, stream, unit_f64, unit_vector, vector_fbm};
+use crate::resources::{Crust, CrustType, NO_PLATE, Orogeny};
+use crate::systems::oceanic_crust::ocean_floor_age_my;
+use crate::systems::resample::defragment_plates;
+
+/// A plate of the initial planet.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InitialPlate {
+    /// Its id.
+    pub id: PlateId,
+    /// Its motion.
+    pub motion: PlateMotion,
+}
+
+/// Seeds of the noise fields, derived from the run seed.
+fn noise_seed(seed: u64, field: u64) -> u64 {
+    hash3(seed, stream::NOISE + field, 0)
+}
+
+#[inline]
+fn smoothstep(e0: f64, e1: f64, x: f64) -> f64 {
+    let t = ((x - e0) / (e1 - e0)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// The centroid of initial plate `i` (per plate, from the seed).
+pub fn plate_centroid(seed: u64, i: u64) -> DVec3 {
+    unit_vector(hash3(seed, stream::PLATE_CENTROID, 2 * i), hash3(seed, stream::PLATE_CENTROID, 2 * i + 1))
+}
+
+/// The motion of initial plate `i` (per plate, from the seed): a uniform random Euler pole and an
+/// angular speed giving surface speeds up to between `min_speed_fraction`·v0 and v0.
+pub fn plate_motion(params: &Params, i: u64) -> PlateMotion {
+    let seed = params.planet.seed;
+    let pole = unit_vector(hash3(seed, stream::PLATE_MOTION, 3 * i), hash3(seed, stream::PLATE_MOTION, 3 * i + 1));
+    let f = params.plates.min_speed_fraction;
+    let u = f + (1.0 - f) * unit_f64(hash3(seed, stream::PLATE_MOTION, 3 * i + 2));
+    // v0 in mm/yr = km/My; ω = v / R.
+    let omega = u * params.plates.max_speed_mm_per_yr / params.planet.radius_km;
+    PlateMotion { euler_pole: pole, angular_speed_rad_per_my: omega }
+}
+
+/// Plate of each sample by warped Voronoi, plus the two-nearest distance gap used to soften the
+/// per-plate continental bias near borders.
+fn warped_voronoi(mesh: &SphereMesh, params: &Params, centroids: &[DVec3]) -> (Vec<u32>, Vec<(u32, u32, f64)>) {
+    let r = params.planet.radius_km;
+    let amp = params.init.border_warp_km / r;
+    let wl = params.init.border_warp_wavelength_km / r;
+    let wseed = noise_seed(params.planet.seed, 1);
+    let nearest: Vec<(u32, u32, f64)> = mesh
+        .positions
+        .par_iter()
+        .with_min_len(1024)
+        .map(|&p| {
+            let pw = if amp > 0.0 { (p + vector_fbm(wseed, p, wl, 4) * amp).normalize() } else { p };
+            let (mut i1, mut i2) = (0u32, 0u32);
+            let (mut best1, mut best2) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
+            for (i, c) in centroids.iter().enumerate() {
+                let d = pw.dot(*c);
+                if d > best1 {
+                    best2 = best1;
+                    i2 = i1;
+                    best1 = d;
+                    i1 = i as u32;
+                } else if d > best2 {
+                    best2 = d;
+                    i2 = i as u32;
+                }
+            }
+            let gap = angle_between(pw, centroids[i2 as usize]) - angle_between(pw, centroids[i1 as usize]);
+            (i1, i2, gap)
+        })
+        .collect();
+    (nearest.iter().map(|n| n.0).collect(), nearest)
+}
+
+/// Builds the reference mesh for the parameters.
+pub fn reference_mesh(params: &Params) -> Result<SphereMesh, MeshError> {
+    SphereMesh::fibonacci(
+        params.planet.samples as usize,
+        params.planet.sample_jitter,
+        params.planet.seed,
+        params.planet.radius_km,
+    )
+}
+
+/// Builds the initial crust and plates on `mesh`.
+pub fn initial_planet(mesh: &SphereMesh, params: &Params) -> (Crust, Vec<InitialPlate>) {
+    let mesh = mesh;
+    let n = mesh.len();
+    let seed = params.planet.seed;
+    let r = params.planet.radius_km;
+    let n_plates = params.init.plates as usize;
+    let centroids: Vec<DVec3> = (0..n_plates as u64).map(|i| plate_centroid(seed, i)).collect();
+    let (mut plate, nearest) = warped_voronoi(mesh, params, &centroids);
+    let mut unused = n_plates as u32;
+    defragment_plates(mesh, &mut plate, f64::INFINITY, false, &mut unused);
+
+    // Continents: fBm noise plus a per-plate bias, softened across borders; the top
+    // `continental_fraction` of the area (by this score) becomes continental crust.
+    let bias: Vec<f64> = (0..n_plates as u64)
+        .map(|i| 2.0 * unit_f64(hash3(seed, stream::PLATE_CONTINENT, i)) - 1.0)
+        .collect();
+    let cont_wl = params.init.continent_wavelength_km / r;
+    let border_soft = (params.init.border_warp_km.max(300.0) / r).max(1e-6);
+    let cseed = noise_seed(seed, 2);
+    let score: Vec<f64> = mesh
+        .positions
+        .par_iter()
+        .zip(nearest.par_iter())
+        .with_min_len(1024)
+        .map(|(&p, &(i1, i2, gap))| {
+            let t = smoothstep(0.0, border_soft, gap);
+            let b1 = bias[i1 as usize];
+            let b = 0.5 * (b1 + bias[i2 as usize]) * (1.0 - t) + b1 * t;
+            0.6 * fbm(cseed, p, cont_wl, 6) + 0.5 * b
+        })
+        .collect();
+    let total_area: f64 = mesh.area_km2.iter().sum();
+    let target = params.init.continental_fraction * total_area;
+    let mut order: Vec<u32> = (0..n as u32).collect();
+    order.par_sort_unstable_by(|&a, &b| score[b as usize].total_cmp(&score[a as usize]).then(a.cmp(&b)));
+    let mut acc = 0.0;
+    let mut threshold = f64::INFINITY;
+    for &s in &order {
+        if acc >= target {
+            break;
+        }
+        acc += mesh.area_km2[s as usize];
+        threshold = score[s as usize];
+    }
+    drop(order);
+
+    let eseed = noise_seed(seed, 3);
+    let oseed = noise_seed(seed, 4);
+    let aseed = noise_seed(seed, 5);
+    let i = &params.init;
+    let mut crust = Crust::with_len(n);
+    crust
+        .elevation_km
+        .par_iter_mut()
+        .zip(crust.crust_type.par_iter_mut())
+        .zip(crust.thickness_km.par_iter_mut())
+        .zip(crust.age_my.par_iter_mut())
+        .zip(mesh.positions.par_iter().zip(score.par_iter()))
+        .with_min_len(1024)
+        .for_each(|((((z, ct), e), age), (&p, &s))| {
+            if s >= threshold && target > 0.0 {
+                let h = s - threshold;
+                let zc = i.continental_elevation_km * (0.3 + 0.7 * smoothstep(0.0, 0.12, h))
+                    + i.elevation_noise_km * fbm(eseed, p, cont_wl / 3.0, 5);
+                *z = zc as f32;
+                *ct = CrustType::Continental;
+                *e = i.continental_thickness_km as f32;
+                *age = (1500.0 + 500.0 * fbm(aseed, p, cont_wl, 3)) as f32;
+            } else {
+                let o = &params.ocean;
+                let zo = (i.oceanic_elevation_km + 2.0 * i.elevation_noise_km * fbm(oseed, p, cont_wl / 2.0, 4))
+                    .clamp(o.abyssal_elevation_km, o.ridge_elevation_km);
+                // Shallower floor close to the continents (continental rise).
+                let margin = if target > 0.0 { smoothstep(0.0, 0.1, threshold - s) } else { 1.0 };
+                let zo = -1.5 * (1.0 - margin) + zo * margin;
+                *z = zo as f32;
+                *ct = CrustType::Oceanic;
+                *e = i.oceanic_thickness_km as f32;
+                *age = ocean_floor_age_my(zo, params) as f32;
+            }
+        });
+    crust.orogeny.iter_mut().for_each(|o| *o = Orogeny::None);
+    crust.plate.copy_from_slice(&plate);
+
+    let mut present = vec![false; n_plates];
+    for &p in &plate {
+        if p != NO_PLATE {
+            present[p as usize] = true;
+        }
+    }
+    let plates: Vec<InitialPlate> = (0..n_plates)
+        .filter(|&k| present[k])
+        .map(|k| InitialPlate { id: PlateId(k as u32), motion: plate_motion(params, k as u64) })
+        .collect();
+    if plates.len() < n_plates {
+        tracing::warn!(asked = n_plates, made = plates.len(), "some initial plates got no samples and were dropped");
+    }
+    (crust, plates)
+}

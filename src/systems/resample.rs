@@ -1,0 +1,554 @@
+//! Global resampling (paper §6, Driftworld §3.7): every sample of the fixed reference mesh takes
+//! its data from the plate that covers it now, by barycentric interpolation in that plate's
+//! rotated triangulation; samples that no plate covers are gaps, filled by the gap fillers
+//! (new oceanic crust, see `oceanic_crust`); then the plates are rebuilt from the new
+//! assignment and their frames reset to the identity.
+//!
+//! How a plate covers a point: the point is rotated into the plate frame and located in the
+//! reference mesh; the plate covers it if that triangle has at least one vertex owned by the
+//! plate. Triangles straddling two plates therefore belong to both, so plates that move together
+//! leave no seam of "gap" between them (the trap that made other implementations turn every
+//! plate boundary into new ocean at every resampling). A plate covers the point from its *core*
+//! when the triangle's nearest vertex (largest weight) is its own, from its *fringe* otherwise.
+//! Core beats fringe; among cores (two plates overlapping), the plate order decides which one
+//! stays on top (Driftworld §3.5, by overlap score). With every plate at rest, each sample is the
+//! nearest vertex of its own triangle, so resampling is exactly the identity.
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+use std::time::Instant;
+
+use bevy_ecs::prelude::*;
+use glam::{DQuat, DVec3};
+use rayon::prelude::*;
+
+use crate::components::{Plate, PlateBounds, PlateFrame, PlateId, PlateMesh, PlateMotion, PlateStats};
+use crate::geometry::{SphereMesh, angle_between};
+use crate::io::params::Params;
+use crate::resources::{
+    Crust, CrustType, NO_PLATE, NextPlateId, PlateTable, ResampleRequest, SimClock, StepTimings,
+};
+
+/// Where one output sample takes its data from.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SampleSource {
+    /// Slot (in the plate table) of the covering plate, `u32::MAX` for a gap.
+    pub slot: u32,
+    /// Triangle of the reference mesh, in the plate frame.
+    pub triangle: u32,
+    /// Barycentric weights in that triangle.
+    pub weights: [f64; 3],
+}
+
+impl SampleSource {
+    const GAP: SampleSource = SampleSource { slot: u32::MAX, triangle: 0, weights: [0.0; 3] };
+    /// True when no plate covers the sample.
+    pub fn is_gap(&self) -> bool {
+        self.slot == u32::MAX
+    }
+}
+
+/// The nearest covered sample of one plate, seen from a gap sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GapNeighbour {
+    /// Plate id.
+    pub plate: u32,
+    /// The covered sample (reference index) nearest to the gap sample.
+    pub seed: u32,
+    /// Great-circle distance from the gap sample to the seed, radians.
+    pub distance_rad: f64,
+}
+
+/// A sample no plate covered, with its nearest and second-nearest plates (different plates).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GapSample {
+    /// Reference sample index.
+    pub sample: u32,
+    /// Nearest plate (None only if no plate exists at all).
+    pub nearest: Option<GapNeighbour>,
+    /// Nearest other plate (None when the gap touches a single plate).
+    pub second: Option<GapNeighbour>,
+}
+
+/// Work area of a resampling in progress (a resource). Reused between resamplings so memory
+/// stays flat.
+#[derive(Resource, Default)]
+pub struct ResampleWork {
+    /// True between the interpolation and the rebuild of a step that resamples.
+    pub active: bool,
+    /// The crust being built; swapped in at the rebuild.
+    pub next: Crust,
+    /// Gap samples of this resampling.
+    pub gaps: Vec<GapSample>,
+    /// Time since the previous resampling, My.
+    pub elapsed_my: f64,
+    /// Per-sample sources of this resampling.
+    pub sources: Vec<SampleSource>,
+    started: Option<Instant>,
+}
+
+/// Finds, for every reference sample, the plate that covers it and where (see module docs).
+pub fn locate_sources(mesh: &SphereMesh, old: &Crust, table: &PlateTable, sources: &mut Vec<SampleSource>) {
+    sources.clear();
+    sources.resize(mesh.len(), SampleSource::GAP);
+    sources.par_iter_mut().enumerate().with_min_len(1024).for_each(|(j, src)| {
+        *src = locate_one(mesh, old, table, mesh.positions[j]);
+    });
+}
+
+/// The covering plate of world point `q` (see module docs); `SampleSource::GAP` if none.
+#[inline]
+pub fn locate_one(mesh: &SphereMesh, old: &Crust, table: &PlateTable, q: DVec3) -> SampleSource {
+    let mut fallback = SampleSource::GAP;
+    for &slot in &table.by_rank {
+        let p = &table.plates[slot as usize];
+        if q.dot(p.centroid_world) < p.cap_cos {
+            continue;
+        }
+        let loc = mesh.locate(p.plate_from_world * q);
+        let tri = mesh.triangles[loc.triangle as usize];
+        let owners = [old.plate[tri[0] as usize], old.plate[tri[1] as usize], old.plate[tri[2] as usize]];
+        if !owners.contains(&p.id) {
+            continue;
+        }
+        let found = SampleSource { slot, triangle: loc.triangle, weights: loc.weights };
+        if owners[loc.dominant_corner()] == p.id {
+            return found;
+        }
+        if fallback.is_gap() {
+            fallback = found;
+        }
+    }
+    fallback
+}
+
+#[inline]
+fn dominant(w: &[f64; 3]) -> usize {
+    if w[0] >= w[1] && w[0] >= w[2] {
+        0
+    } else if w[1] >= w[2] {
+        1
+    } else {
+        2
+    }
+}
+
+/// Interpolates every field of `old` at the sources into `next` (gap samples get zeros and
+/// `NO_PLATE`). Scalars are barycentric; categories come from the nearest vertex; direction
+/// fields are interpolated in the plate frame, rotated to the world and projected onto the
+/// tangent plane.
+pub fn interpolate(mesh: &SphereMesh, old: &Crust, table: &PlateTable, sources: &[SampleSource], next: &mut Crust) {
+    next.resize(mesh.len());
+    let Crust { elevation_km, thickness_km, crust_type, age_my, ridge_dir, orogeny, orogeny_age_my, fold_dir, plate } =
+        next;
+    (
+        elevation_km.par_iter_mut(),
+        thickness_km.par_iter_mut(),
+        crust_type.par_iter_mut(),
+        age_my.par_iter_mut(),
+        ridge_dir.par_iter_mut(),
+        orogeny.par_iter_mut(),
+        orogeny_age_my.par_iter_mut(),
+        fold_dir.par_iter_mut(),
+        plate.par_iter_mut(),
+        sources.par_iter(),
+        mesh.positions.par_iter(),
+    )
+        .into_par_iter()
+        .with_min_len(1024)
+        .for_each(|(z, e, ct, age, rd, og, oga, fd, pl, src, &q)| {
+            if src.is_gap() {
+                *z = 0.0;
+                *e = 0.0;
+                *ct = CrustType::Oceanic;
+                *age = 0.0;
+                *rd = [0.0; 3];
+                *og = Default::default();
+                *oga = 0.0;
+                *fd = [0.0; 3];
+                *pl = NO_PLATE;
+                return;
+            }
+            let t = mesh.triangles[src.triangle as usize];
+            let v = [t[0] as usize, t[1] as usize, t[2] as usize];
+            let w = src.weights;
+            let lerp = |f: &[f32]| (w[0] * f[v[0]] as f64 + w[1] * f[v[1]] as f64 + w[2] * f[v[2]] as f64) as f32;
+            let plate_state = &table.plates[src.slot as usize];
+            let dir = |f: &[[f32; 3]]| -> [f32; 3] {
+                let mut acc = DVec3::ZERO;
+                for k in 0..3 {
+                    let a = f[v[k]];
+                    acc += DVec3::new(a[0] as f64, a[1] as f64, a[2] as f64) * w[k];
+                }
+                if acc == DVec3::ZERO {
+                    return [0.0; 3];
+                }
+                let world = plate_state.world_from_plate * acc;
+                let t = world - q * q.dot(world);
+                [t.x as f32, t.y as f32, t.z as f32]
+            };
+            let d = v[dominant(&w)];
+            *z = lerp(&old.elevation_km);
+            *e = lerp(&old.thickness_km);
+            *ct = old.crust_type[d];
+            *age = lerp(&old.age_my);
+            *rd = dir(&old.ridge_dir);
+            *og = old.orogeny[d];
+            *oga = lerp(&old.orogeny_age_my);
+            *fd = dir(&old.fold_dir);
+            *pl = plate_state.id;
+        });
+}
+
+/// For every gap sample, the nearest covered sample of the nearest plate and of the nearest other
+/// plate. Labels spread from the covered samples bordering the gaps through the gap samples in
+/// order of true great-circle distance to their seed (never hop counts), two labels of distinct
+/// plates per sample at most.
+pub fn nearest_two_plates(mesh: &SphereMesh, plate: &[u32], gaps: &[u32]) -> Vec<GapSample> {
+    let mut out: Vec<GapSample> =
+        gaps.iter().map(|&g| GapSample { sample: g, nearest: None, second: None }).collect();
+    if gaps.is_empty() {
+        return out;
+    }
+    let mut gap_index = vec![u32::MAX; mesh.len()];
+    for (k, &g) in gaps.iter().enumerate() {
+        gap_index[g as usize] = k as u32;
+    }
+    let pos = &mesh.positions;
+    let mut heap: BinaryHeap<Reverse<(u64, u32, u32)>> = BinaryHeap::with_capacity(gaps.len() * 2);
+    for &g in gaps {
+        for &nb in mesh.neighbors_of(g as usize) {
+            if gap_index[nb as usize] == u32::MAX && plate[nb as usize] != NO_PLATE {
+                let d = angle_between(pos[g as usize], pos[nb as usize]);
+                heap.push(Reverse((d.to_bits(), g, nb)));
+            }
+        }
+    }
+    while let Some(Reverse((bits, node, seed))) = heap.pop() {
+        let p = plate[seed as usize];
+        let label = GapNeighbour { plate: p, seed, distance_rad: f64::from_bits(bits) };
+        let gs = &mut out[gap_index[node as usize] as usize];
+        match (gs.nearest, gs.second) {
+            (None, _) => gs.nearest = Some(label),
+            (Some(a), None) if a.plate != p => gs.second = Some(label),
+            _ => continue,
+        }
+        let seed_pos = pos[seed as usize];
+        for &h in mesh.neighbors_of(node as usize) {
+            let kh = gap_index[h as usize];
+            if kh == u32::MAX {
+                continue;
+            }
+            let o = &out[kh as usize];
+            if o.second.is_some() || o.nearest.is_some_and(|a| a.plate == p) {
+                continue;
+            }
+            let d = angle_between(pos[h as usize], seed_pos);
+            heap.push(Reverse((d.to_bits(), h, seed)));
+        }
+    }
+    out
+}
+
+/// Fills each gap sample with a copy of its nearest covered sample (the fallback when no gap
+/// filler such as the oceanic-crust plugin runs): the nearest plate simply stretches.
+pub fn fill_gaps_from_nearest(next: &mut Crust, gaps: &[GapSample]) {
+    for g in gaps {
+        let Some(a) = g.nearest else { continue };
+        let (j, s) = (g.sample as usize, a.seed as usize);
+        next.elevation_km[j] = next.elevation_km[s];
+        next.thickness_km[j] = next.thickness_km[s];
+        next.crust_type[j] = next.crust_type[s];
+        next.age_my[j] = next.age_my[s];
+        next.ridge_dir[j] = next.ridge_dir[s];
+        next.orogeny[j] = next.orogeny[s];
+        next.orogeny_age_my[j] = next.orogeny_age_my[s];
+        next.fold_dir[j] = next.fold_dir[s];
+        next.plate[j] = a.plate;
+    }
+}
+
+/// A plate created by splitting a disconnected piece off its parent.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PlateSplit {
+    /// The new plate.
+    pub child: u32,
+    /// The plate it came from (whose motion it inherits).
+    pub parent: u32,
+}
+
+/// Makes every plate one connected region of the mesh: for each plate the largest connected
+/// piece keeps the id; a smaller piece becomes a plate of its own when its area is at least
+/// `min_area_km2` (if `allow_split`), otherwise it joins the neighbouring plate it shares most
+/// edges with. Deterministic (pieces are found in sample order).
+pub fn defragment_plates(
+    mesh: &SphereMesh,
+    plate: &mut [u32],
+    min_area_km2: f64,
+    allow_split: bool,
+    next_id: &mut u32,
+) -> Vec<PlateSplit> {
+    let n = mesh.len();
+    let mut comp = vec![u32::MAX; n];
+    // (plate, area, first sample, sample count)
+    let mut comps: Vec<(u32, f64)> = Vec::new();
+    let mut members: Vec<u32> = Vec::with_capacity(n);
+    let mut comp_start: Vec<usize> = Vec::new();
+    let mut stack: Vec<u32> = Vec::new();
+    for s in 0..n {
+        if comp[s] != u32::MAX {
+            continue;
+        }
+        let c = comps.len() as u32;
+        let p = plate[s];
+        comp[s] = c;
+        stack.push(s as u32);
+        comp_start.push(members.len());
+        let mut area = 0.0;
+        while let Some(u) = stack.pop() {
+            members.push(u);
+            area += mesh.area_km2[u as usize];
+            for &v in mesh.neighbors_of(u as usize) {
+                if comp[v as usize] == u32::MAX && plate[v as usize] == p {
+                    comp[v as usize] = c;
+                    stack.push(v);
+                }
+            }
+        }
+        comps.push((p, area));
+    }
+    comp_start.push(members.len());
+    if comps.len() == 1 {
+        return Vec::new();
+    }
+    // Largest piece of each plate.
+    let mut largest: std::collections::BTreeMap<u32, u32> = std::collections::BTreeMap::new();
+    for (c, &(p, area)) in comps.iter().enumerate() {
+        let e = largest.entry(p).or_insert(c as u32);
+        if area > comps[*e as usize].1 {
+            *e = c as u32;
+        }
+    }
+    let mut splits = Vec::new();
+    let mut kept = vec![false; comps.len()];
+    for &c in largest.values() {
+        kept[c as usize] = true;
+    }
+    let mut new_plate_of_comp: Vec<u32> = comps.iter().map(|c| c.0).collect();
+    for (c, &(p, area)) in comps.iter().enumerate() {
+        if !kept[c] && allow_split && area >= min_area_km2 {
+            let child = *next_id;
+            *next_id += 1;
+            new_plate_of_comp[c] = child;
+            kept[c] = true;
+            splits.push(PlateSplit { child, parent: p });
+        }
+    }
+    for c in 0..comps.len() {
+        if kept[c] {
+            continue;
+        }
+        // Count edges to neighbouring pieces; prefer pieces that are kept.
+        let mut counts: Vec<(bool, u32, u32)> = Vec::new(); // (kept, plate, count)
+        for &u in &members[comp_start[c]..comp_start[c + 1]] {
+            for &v in mesh.neighbors_of(u as usize) {
+                let cv = comp[v as usize] as usize;
+                if cv == c {
+                    continue;
+                }
+                let key = (kept[cv], new_plate_of_comp[cv]);
+                match counts.iter_mut().find(|e| (e.0, e.1) == key) {
+                    Some(e) => e.2 += 1,
+                    None => counts.push((key.0, key.1, 1)),
+                }
+            }
+        }
+        counts.sort_by(|a, b| b.0.cmp(&a.0).then(b.2.cmp(&a.2)).then(a.1.cmp(&b.1)));
+        if let Some(&(_, target, _)) = counts.first() {
+            new_plate_of_comp[c] = target;
+        }
+    }
+    for (s, p) in plate.iter_mut().enumerate() {
+        *p = new_plate_of_comp[comp[s] as usize];
+    }
+    splits
+}
+
+/// Geometry and statistics of one plate on the reference mesh.
+#[derive(Clone, Debug, Default)]
+pub struct PlateGeometry {
+    /// Samples and triangles.
+    pub mesh: PlateMesh,
+    /// Bounding cap.
+    pub bounds: Option<PlateBounds>,
+    /// Areas.
+    pub stats: PlateStats,
+}
+
+/// Computes each plate's samples, triangles, bounding cap and areas from a crust on the
+/// reference mesh. Indexed by plate id (plates without samples get `None`).
+pub fn plate_geometry(mesh: &SphereMesh, crust: &Crust) -> Vec<Option<PlateGeometry>> {
+    let max_id = crust.plate.iter().copied().filter(|&p| p != NO_PLATE).max().map_or(0, |m| m as usize + 1);
+    let mut out: Vec<Option<PlateGeometry>> = vec![None; max_id];
+    let mut centroid_sum = vec![DVec3::ZERO; max_id];
+    for (s, &p) in crust.plate.iter().enumerate() {
+        if p == NO_PLATE {
+            continue;
+        }
+        let g = out[p as usize].get_or_insert_with(Default::default);
+        g.mesh.samples.push(s as u32);
+        let a = mesh.area_km2[s];
+        g.stats.area_km2 += a;
+        if crust.crust_type[s] == CrustType::Continental {
+            g.stats.continental_area_km2 += a;
+        }
+        centroid_sum[p as usize] += mesh.positions[s] * a;
+    }
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        let o = [crust.plate[tri[0] as usize], crust.plate[tri[1] as usize], crust.plate[tri[2] as usize]];
+        for k in 0..3 {
+            if o[k] == NO_PLATE || o[..k].contains(&o[k]) {
+                continue;
+            }
+            if let Some(g) = out[o[k] as usize].as_mut() {
+                g.mesh.triangles.push(t as u32);
+            }
+        }
+    }
+    out.par_iter_mut().enumerate().for_each(|(id, g)| {
+        let Some(g) = g.as_mut() else { return };
+        let centroid = centroid_sum[id].try_normalize().unwrap_or_else(|| mesh.positions[g.mesh.samples[0] as usize]);
+        let mut radius: f64 = 0.0;
+        for &s in &g.mesh.samples {
+            radius = radius.max(angle_between(centroid, mesh.positions[s as usize]));
+        }
+        g.bounds = Some(PlateBounds { centroid, cap_radius_rad: radius + 1.5 * mesh.max_edge_rad });
+    });
+    out
+}
+
+/// Run condition: a resampling is due this step (asked for, or the fastest plate has travelled
+/// far enough, within the configured interval bounds).
+pub fn resample_due(
+    clock: Res<SimClock>,
+    params: Res<Params>,
+    request: Res<ResampleRequest>,
+    frames: Query<&PlateFrame>,
+) -> bool {
+    if request.0 {
+        return true;
+    }
+    let steps = clock.steps_since_resample;
+    let (min_steps, max_steps) = (params.resample.min_interval_steps, params.resample.max_interval_steps);
+    if steps >= max_steps {
+        return true;
+    }
+    if steps < min_steps {
+        return false;
+    }
+    let max_angle = frames.iter().map(|f| f.angle_rad()).fold(0.0, f64::max);
+    max_angle * params.planet.radius_km >= params.resample.adaptive_displacement_km
+}
+
+/// First system of a resampling: locates every sample in the moved plates, interpolates, finds
+/// the gaps and their nearest plates, and fills gaps with the nearest plate's data (gap-filler
+/// plugins overwrite that next).
+pub fn resample_interpolate(
+    mesh: Res<SphereMesh>,
+    crust: Res<Crust>,
+    clock: Res<SimClock>,
+    params: Res<Params>,
+    plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
+    mut work: ResMut<ResampleWork>,
+) {
+    let started = Instant::now();
+    let table = PlateTable::from_query(&plates);
+    let work = &mut *work;
+    locate_sources(&mesh, &crust, &table, &mut work.sources);
+    interpolate(&mesh, &crust, &table, &work.sources, &mut work.next);
+    let gap_ids: Vec<u32> =
+        work.sources.iter().enumerate().filter(|(_, s)| s.is_gap()).map(|(j, _)| j as u32).collect();
+    work.gaps = nearest_two_plates(&mesh, &work.next.plate, &gap_ids);
+    fill_gaps_from_nearest(&mut work.next, &work.gaps);
+    work.elapsed_my = clock.steps_since_resample as f64 * params.time.time_step_my;
+    work.active = true;
+    work.started = Some(started);
+    tracing::trace!(gaps = gap_ids.len(), "resample: interpolated");
+}
+
+/// Last system of a resampling: installs the new crust, makes plates connected, rebuilds the
+/// plate entities (samples, triangles, caps, areas), despawns empty plates, spawns split-off
+/// pieces and resets every frame to the identity.
+pub fn resample_rebuild(world: &mut World) {
+    let Some(mut work) = world.get_resource_mut::<ResampleWork>() else { return };
+    if !work.active {
+        return;
+    }
+    work.active = false;
+    let started = work.started.take();
+    let mut next = std::mem::take(&mut work.next);
+    let min_area = world.resource::<Params>().resample.fragment_min_area_km2;
+    let mut next_id = world.resource::<NextPlateId>().0;
+    let splits = {
+        let mesh = world.resource::<SphereMesh>();
+        defragment_plates(mesh, &mut next.plate, min_area, true, &mut next_id)
+    };
+    world.resource_mut::<NextPlateId>().0 = next_id;
+    {
+        let mut crust = world.resource_mut::<Crust>();
+        std::mem::swap(&mut *crust, &mut next);
+    }
+    // Keep the old buffers for the next resampling.
+    world.resource_mut::<ResampleWork>().next = next;
+    rebuild_plate_entities(world, &splits);
+    {
+        let mut clock = world.resource_mut::<SimClock>();
+        clock.steps_since_resample = 0;
+        clock.resamplings += 1;
+    }
+    world.resource_mut::<ResampleRequest>().0 = false;
+    if let Some(t0) = started {
+        world.resource_mut::<StepTimings>().record("resampling", t0.elapsed());
+    }
+}
+
+/// Brings plate entities in line with `Crust::plate`: updates mesh, bounds and stats, despawns
+/// plates left without samples, spawns split-off plates with their parent's motion, and resets
+/// every frame to the identity.
+pub fn rebuild_plate_entities(world: &mut World, splits: &[PlateSplit]) {
+    let geometry = {
+        let mesh = world.resource::<SphereMesh>();
+        let crust = world.resource::<Crust>();
+        plate_geometry(mesh, crust)
+    };
+    let mut existing: Vec<(Entity, u32, PlateMotion)> = world
+        .query::<(Entity, &Plate, &PlateMotion)>()
+        .iter(world)
+        .map(|(e, p, m)| (e, p.id.0, *m))
+        .collect();
+    existing.sort_by_key(|e| e.1);
+    let mut geometry = geometry;
+    for (entity, id, _) in &existing {
+        match geometry.get_mut(*id as usize).and_then(|g| g.take()) {
+            Some(g) => {
+                let bounds = g.bounds.unwrap_or(PlateBounds { centroid: DVec3::Z, cap_radius_rad: std::f64::consts::PI });
+                world.entity_mut(*entity).insert((g.mesh, bounds, g.stats, PlateFrame::default()));
+            }
+            None => {
+                tracing::debug!(plate = id, "plate has no samples left: despawned");
+                world.despawn(*entity);
+            }
+        }
+    }
+    for split in splits {
+        let Some(g) = geometry.get_mut(split.child as usize).and_then(|g| g.take()) else { continue };
+        let motion = existing
+            .iter()
+            .find(|e| e.1 == split.parent)
+            .map(|e| e.2)
+            .unwrap_or(PlateMotion { euler_pole: DVec3::Z, angular_speed_rad_per_my: 0.0 });
+        let bounds = g.bounds.unwrap_or(PlateBounds { centroid: DVec3::Z, cap_radius_rad: std::f64::consts::PI });
+        tracing::debug!(child = split.child, parent = split.parent, "plate piece split off");
+        world.spawn((Plate { id: PlateId(split.child) }, motion, PlateFrame { world_from_plate: DQuat::IDENTITY }, g.mesh, bounds, g.stats));
+    }
+}

@@ -9,6 +9,7 @@
 //! therefore serves every plate, and nothing is rebuilt at resampling.
 
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// Which cube face a direction falls on (0..6 = +x, −x, +y, −y, +z, −z) and its gnomonic face
 /// coordinates (u, v) in [−1, 1].
@@ -45,7 +46,9 @@ fn face_project(f: u8, p: DVec3) -> (f64, f64, f64) {
 /// Equi-angular warp of a gnomonic coordinate, so grid cells have similar areas on the sphere.
 #[inline]
 fn warp(t: f64) -> f64 {
-    t.atan() * (4.0 / std::f64::consts::PI)
+    // A cheap monotone stand-in for atan(t)·4/π (within 0.03 of it on [−1, 1]); build and query
+    // use the same function, so only monotonicity matters for correctness.
+    t * (1.2732 - 0.2732 * t.abs())
 }
 
 /// A located point: the triangle that contains it and its barycentric weights there (the
@@ -89,57 +92,93 @@ impl MeshLocator {
     /// Builds the grid for `triangles` over `positions` (outward-oriented triangles, all smaller
     /// than a few degrees, as any mesh of 1,000 samples or more is).
     pub fn build(positions: &[DVec3], triangles: &[[u32; 3]]) -> Self {
-        let grid = (((2 * positions.len()) as f64 / 6.0).sqrt().round() as usize).clamp(1, 4096);
+        let grid = ((positions.len() as f64 / 6.0).sqrt().round() as usize).clamp(1, 4096);
         let n_cells = 6 * grid * grid;
-        let mut counts = vec![0u32; n_cells + 1];
-        let for_each_cell = |tri: &[u32; 3], f: &mut dyn FnMut(usize)| {
-            let v = [positions[tri[0] as usize], positions[tri[1] as usize], positions[tri[2] as usize]];
-            for face in 0u8..6 {
-                let p = [face_project(face, v[0]), face_project(face, v[1]), face_project(face, v[2])];
-                if p.iter().any(|&(d, _, _)| d < 0.2) {
-                    continue;
-                }
-                let umin = p[0].1.min(p[1].1).min(p[2].1);
-                let umax = p[0].1.max(p[1].1).max(p[2].1);
-                let vmin = p[0].2.min(p[1].2).min(p[2].2);
-                let vmax = p[0].2.max(p[1].2).max(p[2].2);
-                if umin > 1.0 || umax < -1.0 || vmin > 1.0 || vmax < -1.0 {
-                    continue;
-                }
-                let to_cell = |t: f64| -> usize {
-                    let s = (warp(t.clamp(-1.0, 1.0)) + 1.0) * 0.5 * grid as f64;
-                    (s.floor().max(0.0) as usize).min(grid - 1)
-                };
-                let pad = 1e-9;
-                let (i0, i1) = (to_cell(umin - pad), to_cell(umax + pad));
-                let (j0, j1) = (to_cell(vmin - pad), to_cell(vmax + pad));
-                let base = face as usize * grid * grid;
-                for j in j0..=j1 {
-                    for i in i0..=i1 {
-                        f(base + j * grid + i);
+        // (cell << 32 | triangle) for every cell a triangle's bounding box touches, sorted.
+        const CHUNK: usize = 8192;
+        let chunks: Vec<Vec<u64>> = triangles
+            .par_chunks(CHUNK)
+            .enumerate()
+            .map(|(ci, chunk)| {
+            let mut cells: Vec<u64> = Vec::with_capacity(chunk.len() * 6);
+            for (k, tri) in chunk.iter().enumerate() {
+                let t = ci * CHUNK + k;
+                let v = [positions[tri[0] as usize], positions[tri[1] as usize], positions[tri[2] as usize]];
+                for face in 0u8..6 {
+                    let axis = match face {
+                        0 => DVec3::X,
+                        1 => -DVec3::X,
+                        2 => DVec3::Y,
+                        3 => -DVec3::Y,
+                        4 => DVec3::Z,
+                        _ => -DVec3::Z,
+                    };
+                    // A triangle (edges below ~10°) can only reach a face whose axis is within
+                    // about 65° of one of its vertices.
+                    if v.iter().all(|p| p.dot(axis) < 0.4) {
+                        continue;
+                    }
+                    let p = [face_project(face, v[0]), face_project(face, v[1]), face_project(face, v[2])];
+                    if p.iter().any(|&(d, _, _)| d < 0.2) {
+                        continue;
+                    }
+                    let umin = p[0].1.min(p[1].1).min(p[2].1);
+                    let umax = p[0].1.max(p[1].1).max(p[2].1);
+                    let vmin = p[0].2.min(p[1].2).min(p[2].2);
+                    let vmax = p[0].2.max(p[1].2).max(p[2].2);
+                    if umin > 1.0 || umax < -1.0 || vmin > 1.0 || vmax < -1.0 {
+                        continue;
+                    }
+                    let to_cell = |x: f64| -> usize {
+                        let s = (warp(x.clamp(-1.0, 1.0)) + 1.0) * 0.5 * grid as f64;
+                        (s.floor().max(0.0) as usize).min(grid - 1)
+                    };
+                    let pad = 1e-9;
+                    let (i0, i1) = (to_cell(umin - pad), to_cell(umax + pad));
+                    let (j0, j1) = (to_cell(vmin - pad), to_cell(vmax + pad));
+                    let base = face as usize * grid * grid;
+                    for j in j0..=j1 {
+                        for i in i0..=i1 {
+                            cells.push(((base + j * grid + i) as u64) << 32 | t as u64);
+                        }
                     }
                 }
             }
-        };
-        for tri in triangles {
-            for_each_cell(tri, &mut |c| counts[c + 1] += 1);
+            cells
+            })
+            .collect();
+        // Counting sort by cell; within a cell, triangles stay in ascending order.
+        let mut cell_start = vec![0u32; n_cells + 1];
+        for &pr in chunks.iter().flatten() {
+            cell_start[(pr >> 32) as usize + 1] += 1;
         }
         for c in 0..n_cells {
-            counts[c + 1] += counts[c];
+            cell_start[c + 1] += cell_start[c];
         }
-        let mut fill = counts.clone();
-        let mut cell_triangles = vec![0u32; counts[n_cells] as usize];
-        for (t, tri) in triangles.iter().enumerate() {
-            for_each_cell(tri, &mut |c| {
-                cell_triangles[fill[c] as usize] = t as u32;
-                fill[c] += 1;
-            });
+        let mut fill: Vec<u32> = cell_start[..n_cells].to_vec();
+        let mut cell_triangles = vec![0u32; cell_start[n_cells] as usize];
+        for &pr in chunks.iter().flatten() {
+            let c = (pr >> 32) as usize;
+            cell_triangles[fill[c] as usize] = pr as u32;
+            fill[c] += 1;
         }
-        Self { grid, cell_start: counts, cell_triangles }
+        Self { grid, cell_start, cell_triangles }
     }
 
+    /// Number of grid cells.
+    pub fn cell_count(&self) -> usize {
+        self.cell_start.len() - 1
+    }
+
+    /// Triangles whose bounding box touches cell `c`.
     #[inline]
-    fn cell_of(&self, p: DVec3) -> usize {
+    pub fn cell_triangles(&self, c: usize) -> &[u32] {
+        &self.cell_triangles[self.cell_start[c] as usize..self.cell_start[c + 1] as usize]
+    }
+
+    /// The grid cell of unit vector `p`.
+    #[inline]
+    pub fn cell_of(&self, p: DVec3) -> usize {
         let (face, u, v) = cube_face_uv(p);
         let g = self.grid;
         let to_cell = |t: f64| -> usize {
@@ -156,7 +195,12 @@ impl MeshLocator {
 
     /// The triangle containing unit vector `q` and its barycentric weights.
     pub fn locate(&self, positions: &[DVec3], triangles: &[[u32; 3]], q: DVec3) -> Location {
-        let c = self.cell_of(q);
+        self.locate_in_cell(positions, triangles, q, self.cell_of(q))
+    }
+
+    /// [`Self::locate`] when the cell of `q` is already known.
+    #[inline]
+    pub fn locate_in_cell(&self, positions: &[DVec3], triangles: &[[u32; 3]], q: DVec3, c: usize) -> Location {
         let range = self.cell_start[c] as usize..self.cell_start[c + 1] as usize;
         if let Some(loc) = best_in(positions, triangles, q, self.cell_triangles[range].iter().copied()) {
             if loc.1 >= INSIDE_TOLERANCE {
@@ -182,7 +226,11 @@ fn best_in(
     for t in candidates {
         let tri = triangles[t as usize];
         let (a, b, c) = (positions[tri[0] as usize], positions[tri[1] as usize], positions[tri[2] as usize]);
+        // Cheap rejection first: the point is well outside the edge b–c.
         let wa = q.dot(b.cross(c));
+        if wa < 0.0 && best.as_ref().is_some_and(|(_, m)| *m >= 0.0) {
+            continue;
+        }
         let wb = q.dot(c.cross(a));
         let wc = q.dot(a.cross(b));
         let s = wa + wb + wc;
@@ -197,6 +245,10 @@ fn best_in(
         };
         if better {
             best = Some((Location { triangle: t, weights: w }, m));
+            // Strictly inside one triangle means outside every other: nothing can beat it.
+            if m > 1e-9 {
+                break;
+            }
         }
     }
     best

@@ -54,7 +54,9 @@ impl SphereMesh {
         if !(MIN_SAMPLES..=MAX_SAMPLES).contains(&n) {
             return Err(MeshError::SampleCount(n));
         }
+        let t = std::time::Instant::now();
         let positions = fibonacci_points(n, jitter, seed);
+        tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "fibonacci points");
         Self::from_points(positions, radius_km)
     }
 
@@ -62,6 +64,7 @@ impl SphereMesh {
     /// over the whole sphere).
     pub fn from_points(positions: Vec<DVec3>, radius_km: f64) -> Result<Self, MeshError> {
         let n = positions.len();
+        let t = std::time::Instant::now();
         let triangles = spherical_delaunay(&positions)
             .ok_or_else(|| MeshError::Triangulation("degenerate point set".into()))?;
         if triangles.len() != 2 * n - 4 {
@@ -72,41 +75,72 @@ impl SphereMesh {
                 2 * n - 4
             )));
         }
-        // Adjacency (CSR) from the undirected edges.
-        let mut edges: Vec<(u32, u32)> = Vec::with_capacity(triangles.len() * 6);
-        for t in &triangles {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                edges.push((a, b));
-                edges.push((b, a));
-            }
-        }
-        edges.par_sort_unstable();
-        edges.dedup();
+        tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "delaunay");
+        let t = std::time::Instant::now();
+        // Adjacency (CSR). On a closed, consistently oriented triangulation every vertex has as
+        // many neighbours as incident triangles, and each outgoing edge a→b appears in exactly one
+        // triangle as "b follows a", so the neighbours come without sorting or deduplication.
         let mut neighbor_start = vec![0u32; n + 1];
-        for &(a, _) in &edges {
-            neighbor_start[a as usize + 1] += 1;
+        for t in &triangles {
+            for &v in t {
+                neighbor_start[v as usize + 1] += 1;
+            }
         }
         for i in 0..n {
             neighbor_start[i + 1] += neighbor_start[i];
         }
-        let neighbors: Vec<u32> = edges.iter().map(|&(_, b)| b).collect();
-        drop(edges);
-
+        let mut fill: Vec<u32> = neighbor_start[..n].to_vec();
+        let mut neighbors = vec![0u32; neighbor_start[n] as usize];
+        for t in &triangles {
+            for k in 0..3 {
+                let a = t[k] as usize;
+                neighbors[fill[a] as usize] = t[(k + 1) % 3];
+                fill[a] += 1;
+            }
+        }
+        drop(fill);
+        {
+            // Sort each vertex's neighbours (ascending) for deterministic iteration.
+            let starts = &neighbor_start;
+            let mut rest: &mut [u32] = &mut neighbors;
+            let mut slices: Vec<&mut [u32]> = Vec::with_capacity(n);
+            for i in 0..n {
+                let len = (starts[i + 1] - starts[i]) as usize;
+                let (head, tail) = rest.split_at_mut(len);
+                slices.push(head);
+                rest = tail;
+            }
+            slices.par_iter_mut().with_min_len(4096).for_each(|s| s.sort_unstable());
+        }
+        tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "adjacency");
+        let t = std::time::Instant::now();
         let r2 = radius_km * radius_km;
+        let per_triangle: Vec<(f64, f64)> = triangles
+            .par_iter()
+            .with_min_len(4096)
+            .map(|t| {
+                let (a, b, c) = (positions[t[0] as usize], positions[t[1] as usize], positions[t[2] as usize]);
+                let edge = angle_between(a, b).max(angle_between(b, c)).max(angle_between(c, a));
+                (spherical_triangle_area(a, b, c) * r2 / 3.0, edge)
+            })
+            .collect();
         let mut area_km2 = vec![0.0f64; n];
         let mut max_edge_rad = 0.0f64;
-        for t in &triangles {
-            let (a, b, c) = (positions[t[0] as usize], positions[t[1] as usize], positions[t[2] as usize]);
-            let third = spherical_triangle_area(a, b, c) * r2 / 3.0;
+        for (t, &(third, edge)) in triangles.iter().zip(&per_triangle) {
             for &v in t {
                 area_km2[v as usize] += third;
             }
-            max_edge_rad = max_edge_rad.max(angle_between(a, b)).max(angle_between(b, c)).max(angle_between(c, a));
+            max_edge_rad = max_edge_rad.max(edge);
         }
+        drop(per_triangle);
+        tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "areas");
+        let t = std::time::Instant::now();
         let locator = MeshLocator::build(&positions, &triangles);
+        tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "locator");
+        let t = std::time::Instant::now();
         let mesh = Self { positions, triangles, neighbor_start, neighbors, area_km2, radius_km, max_edge_rad, locator };
         mesh.check_topology()?;
+        tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "topology check");
         Ok(mesh)
     }
 
@@ -152,6 +186,11 @@ impl SphereMesh {
     #[inline]
     pub fn locate(&self, q: DVec3) -> Location {
         self.locator.locate(&self.positions, &self.triangles, q)
+    }
+
+    /// The point locator (grid cells over the triangles).
+    pub fn locator(&self) -> &MeshLocator {
+        &self.locator
     }
 
     /// Bytes held on the heap by the mesh.

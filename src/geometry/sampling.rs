@@ -3,6 +3,7 @@
 //! for every per-sample pass).
 
 use glam::DVec3;
+use rayon::prelude::*;
 
 use super::locator::cube_face_uv;
 use super::spherical::tangent_basis;
@@ -20,6 +21,8 @@ pub fn fibonacci_points(n: usize, jitter: f64, seed: u64) -> Vec<DVec3> {
     let golden_angle = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     let max_offset = jitter.clamp(0.0, 0.95) * 0.5 * mean_spacing_rad(n);
     let mut pts: Vec<DVec3> = (0..n)
+        .into_par_iter()
+        .with_min_len(4096)
         .map(|i| {
             let z = 1.0 - (2.0 * i as f64 + 1.0) / n as f64;
             let r = (1.0 - z * z).max(0.0).sqrt();
@@ -36,8 +39,8 @@ pub fn fibonacci_points(n: usize, jitter: f64, seed: u64) -> Vec<DVec3> {
             }
         })
         .collect();
-    let mut keyed: Vec<(u64, usize)> = pts.iter().enumerate().map(|(i, &p)| (morton_key(p), i)).collect();
-    keyed.sort_unstable();
+    let mut keyed: Vec<(u64, usize)> = pts.par_iter().enumerate().map(|(i, &p)| (morton_key(p), i)).collect();
+    keyed.par_sort_unstable();
     let sorted: Vec<DVec3> = keyed.iter().map(|&(_, i)| pts[i]).collect();
     pts.clear();
     sorted

@@ -14,8 +14,6 @@
 //! stays on top (Driftworld §3.5, by overlap score). With every plate at rest, each sample is the
 //! nearest vertex of its own triangle, so resampling is exactly the identity.
 
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
 use std::time::Instant;
 
 use bevy_ecs::prelude::*;
@@ -87,25 +85,88 @@ pub struct ResampleWork {
     started: Option<Instant>,
 }
 
+/// Up to four plate slots per locator cell: the plates owning a vertex of a triangle that
+/// touches the cell ([`CellPlates::MANY`] in the first entry when there are more). A plate absent
+/// from the cell of a point cannot cover the point, so most plates are rejected without locating.
+pub struct CellPlates {
+    cells: Vec<[u16; 4]>,
+}
+
+impl CellPlates {
+    const EMPTY: u16 = u16::MAX;
+    const MANY: u16 = u16::MAX - 1;
+
+    /// Builds the lists for the ownership of `old` (slots of `table`).
+    pub fn build(mesh: &SphereMesh, old: &Crust, table: &PlateTable) -> Self {
+        let slot_of_sample: Vec<u16> = old
+            .plate
+            .par_iter()
+            .with_min_len(4096)
+            .map(|&p| table.slot(p).map_or(Self::EMPTY, |s| s.min(Self::MANY as usize - 1) as u16))
+            .collect();
+        let loc = mesh.locator();
+        let mut cells = vec![[Self::EMPTY; 4]; loc.cell_count()];
+        let many_slots = table.len() >= Self::MANY as usize;
+        cells.par_iter_mut().enumerate().with_min_len(1024).for_each(|(c, list)| {
+            if many_slots {
+                *list = [Self::MANY, Self::EMPTY, Self::EMPTY, Self::EMPTY];
+                return;
+            }
+            let mut n = 0;
+            for &t in loc.cell_triangles(c) {
+                for &v in &mesh.triangles[t as usize] {
+                    let s = slot_of_sample[v as usize];
+                    if s == Self::EMPTY || list[..n].contains(&s) {
+                        continue;
+                    }
+                    if n == 4 {
+                        *list = [Self::MANY, Self::EMPTY, Self::EMPTY, Self::EMPTY];
+                        return;
+                    }
+                    list[n] = s;
+                    n += 1;
+                }
+            }
+        });
+        Self { cells }
+    }
+
+    /// Whether plate `slot` may cover points of cell `c`.
+    #[inline]
+    pub fn may_cover(&self, c: usize, slot: u32) -> bool {
+        let l = &self.cells[c];
+        l[0] == Self::MANY || l.contains(&(slot as u16))
+    }
+}
+
 /// Finds, for every reference sample, the plate that covers it and where (see module docs).
 pub fn locate_sources(mesh: &SphereMesh, old: &Crust, table: &PlateTable, sources: &mut Vec<SampleSource>) {
+    let t = Instant::now();
+    let cell_plates = CellPlates::build(mesh, old, table);
+    tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "resample: cell plates");
     sources.clear();
     sources.resize(mesh.len(), SampleSource::GAP);
     sources.par_iter_mut().enumerate().with_min_len(1024).for_each(|(j, src)| {
-        *src = locate_one(mesh, old, table, mesh.positions[j]);
+        *src = locate_one(mesh, old, table, &cell_plates, mesh.positions[j]);
     });
 }
 
 /// The covering plate of world point `q` (see module docs); `SampleSource::GAP` if none.
 #[inline]
-pub fn locate_one(mesh: &SphereMesh, old: &Crust, table: &PlateTable, q: DVec3) -> SampleSource {
+pub fn locate_one(mesh: &SphereMesh, old: &Crust, table: &PlateTable, cells: &CellPlates, q: DVec3) -> SampleSource {
     let mut fallback = SampleSource::GAP;
+    let locator = mesh.locator();
     for &slot in &table.by_rank {
         let p = &table.plates[slot as usize];
         if q.dot(p.centroid_world) < p.cap_cos {
             continue;
         }
-        let loc = mesh.locate(p.plate_from_world * q);
+        let ql = p.plate_from_world * q;
+        let cell = locator.cell_of(ql);
+        if !cells.may_cover(cell, slot) {
+            continue;
+        }
+        let loc = locator.locate_in_cell(&mesh.positions, &mesh.triangles, ql, cell);
         let tri = mesh.triangles[loc.triangle as usize];
         let owners = [old.plate[tri[0] as usize], old.plate[tri[1] as usize], old.plate[tri[2] as usize]];
         if !owners.contains(&p.id) {
@@ -134,7 +195,8 @@ fn dominant(w: &[f64; 3]) -> usize {
 }
 
 /// Interpolates every field of `old` at the sources into `next` (gap samples get zeros and
-/// `NO_PLATE`). Scalars are barycentric; categories come from the nearest vertex; direction
+/// `NO_PLATE`). Scalars are barycentric; the crust type is a weighted vote; other categories
+/// come from the nearest vertex; direction
 /// fields are interpolated in the plate frame, rotated to the world and projected onto the
 /// tangent plane.
 pub fn interpolate(mesh: &SphereMesh, old: &Crust, table: &PlateTable, sources: &[SampleSource], next: &mut Crust) {
@@ -190,7 +252,10 @@ pub fn interpolate(mesh: &SphereMesh, old: &Crust, table: &PlateTable, sources: 
             let d = v[dominant(&w)];
             *z = lerp(&old.elevation_km);
             *e = lerp(&old.thickness_km);
-            *ct = old.crust_type[d];
+            // Crust type by weighted vote (the 0.5 level of the interpolated indicator): smoother
+            // coastlines than the nearest vertex, which roughens them at every resampling.
+            let cont: f64 = (0..3).filter(|&k| old.crust_type[v[k]] == CrustType::Continental).map(|k| w[k]).sum();
+            *ct = if cont >= 0.5 { CrustType::Continental } else { CrustType::Oceanic };
             *age = lerp(&old.age_my);
             *rd = dir(&old.ridge_dir);
             *og = old.orogeny[d];
@@ -215,37 +280,55 @@ pub fn nearest_two_plates(mesh: &SphereMesh, plate: &[u32], gaps: &[u32]) -> Vec
         gap_index[g as usize] = k as u32;
     }
     let pos = &mesh.positions;
-    let mut heap: BinaryHeap<Reverse<(u64, u32, u32)>> = BinaryHeap::with_capacity(gaps.len() * 2);
+    // Bucket queue keyed by distance (Dial's algorithm): a quarter of the mean spacing per
+    // bucket. Inside a bucket, entries are taken in insertion order, which is deterministic.
+    let width = 0.25 * mesh.mean_spacing_rad();
+    let mut buckets: Vec<Vec<(u32, u32, f64)>> = Vec::new();
+    let push = |buckets: &mut Vec<Vec<(u32, u32, f64)>>, current: usize, d: f64, node: u32, seed: u32| {
+        let b = ((d / width) as usize).max(current);
+        if b >= buckets.len() {
+            buckets.resize_with(b + 1, Vec::new);
+        }
+        buckets[b].push((node, seed, d));
+    };
     for &g in gaps {
         for &nb in mesh.neighbors_of(g as usize) {
             if gap_index[nb as usize] == u32::MAX && plate[nb as usize] != NO_PLATE {
                 let d = angle_between(pos[g as usize], pos[nb as usize]);
-                heap.push(Reverse((d.to_bits(), g, nb)));
+                push(&mut buckets, 0, d, g, nb);
             }
         }
     }
-    while let Some(Reverse((bits, node, seed))) = heap.pop() {
-        let p = plate[seed as usize];
-        let label = GapNeighbour { plate: p, seed, distance_rad: f64::from_bits(bits) };
-        let gs = &mut out[gap_index[node as usize] as usize];
-        match (gs.nearest, gs.second) {
-            (None, _) => gs.nearest = Some(label),
-            (Some(a), None) if a.plate != p => gs.second = Some(label),
-            _ => continue,
-        }
-        let seed_pos = pos[seed as usize];
-        for &h in mesh.neighbors_of(node as usize) {
-            let kh = gap_index[h as usize];
-            if kh == u32::MAX {
-                continue;
+    let mut current = 0;
+    while current < buckets.len() {
+        let mut k = 0;
+        while k < buckets[current].len() {
+            let (node, seed, d) = buckets[current][k];
+            k += 1;
+            let p = plate[seed as usize];
+            let label = GapNeighbour { plate: p, seed, distance_rad: d };
+            let gs = &mut out[gap_index[node as usize] as usize];
+            match (gs.nearest, gs.second) {
+                (None, _) => gs.nearest = Some(label),
+                (Some(a), None) if a.plate != p => gs.second = Some(label),
+                _ => continue,
             }
-            let o = &out[kh as usize];
-            if o.second.is_some() || o.nearest.is_some_and(|a| a.plate == p) {
-                continue;
+            let seed_pos = pos[seed as usize];
+            for &h in mesh.neighbors_of(node as usize) {
+                let kh = gap_index[h as usize];
+                if kh == u32::MAX {
+                    continue;
+                }
+                let o = &out[kh as usize];
+                if o.second.is_some() || o.nearest.is_some_and(|a| a.plate == p) {
+                    continue;
+                }
+                let dh = angle_between(pos[h as usize], seed_pos);
+                push(&mut buckets, current, dh, h, seed);
             }
-            let d = angle_between(pos[h as usize], seed_pos);
-            heap.push(Reverse((d.to_bits(), h, seed)));
         }
+        buckets[current] = Vec::new();
+        current += 1;
     }
     out
 }
@@ -464,11 +547,19 @@ pub fn resample_interpolate(
     let started = Instant::now();
     let table = PlateTable::from_query(&plates);
     let work = &mut *work;
+    let lap = |name: &str, t: &mut Instant| {
+        tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "resample: {name}");
+        *t = Instant::now();
+    };
+    let mut t = Instant::now();
     locate_sources(&mesh, &crust, &table, &mut work.sources);
+    lap("locate", &mut t);
     interpolate(&mesh, &crust, &table, &work.sources, &mut work.next);
+    lap("interpolate", &mut t);
     let gap_ids: Vec<u32> =
         work.sources.iter().enumerate().filter(|(_, s)| s.is_gap()).map(|(j, _)| j as u32).collect();
     work.gaps = nearest_two_plates(&mesh, &work.next.plate, &gap_ids);
+    lap("nearest plates of gaps", &mut t);
     fill_gaps_from_nearest(&mut work.next, &work.gaps);
     work.elapsed_my = clock.steps_since_resample as f64 * params.time.time_step_my;
     work.active = true;
@@ -489,10 +580,13 @@ pub fn resample_rebuild(world: &mut World) {
     let mut next = std::mem::take(&mut work.next);
     let min_area = world.resource::<Params>().resample.fragment_min_area_km2;
     let mut next_id = world.resource::<NextPlateId>().0;
+    let t = Instant::now();
     let splits = {
         let mesh = world.resource::<SphereMesh>();
         defragment_plates(mesh, &mut next.plate, min_area, true, &mut next_id)
     };
+    tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "resample: defragment");
+    let t = Instant::now();
     world.resource_mut::<NextPlateId>().0 = next_id;
     {
         let mut crust = world.resource_mut::<Crust>();
@@ -501,6 +595,7 @@ pub fn resample_rebuild(world: &mut World) {
     // Keep the old buffers for the next resampling.
     world.resource_mut::<ResampleWork>().next = next;
     rebuild_plate_entities(world, &splits);
+    tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "resample: rebuild plates");
     {
         let mut clock = world.resource_mut::<SimClock>();
         clock.steps_since_resample = 0;

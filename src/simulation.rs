@@ -200,6 +200,65 @@ impl Simulation {
         &mut self.app
     }
 
+    /// Replaces the plates: `plate_of_sample` gives the new owner of every reference sample and
+    /// `motions` the motion of every plate it names (ids are free to choose). Only allowed right
+    /// after a resampling (every frame at identity), e.g. at the start or after
+    /// [`Self::request_resample`] and a step; used to author scenarios.
+    pub fn reassign_plates(&mut self, plate_of_sample: Vec<u32>, motions: &[(u32, PlateMotion)]) -> Result<(), SimError> {
+        if self.clock().steps_since_resample != 0 {
+            return Err(SimError::BadArgument("plates can only be reassigned right after a resampling".into()));
+        }
+        if plate_of_sample.len() != self.mesh().len() {
+            return Err(SimError::BadArgument(format!(
+                "{} plate ids given for {} samples",
+                plate_of_sample.len(),
+                self.mesh().len()
+            )));
+        }
+        let mut ids: Vec<u32> = motions.iter().map(|m| m.0).collect();
+        ids.sort_unstable();
+        if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
+            return Err(SimError::BadArgument(format!("plate {} has two motions", w[0])));
+        }
+        if let Some(&bad) = plate_of_sample.iter().find(|p| ids.binary_search(p).is_err()) {
+            return Err(SimError::BadArgument(format!("plate {bad} is used by a sample but has no motion")));
+        }
+        let world = self.app.world_mut();
+        let old: Vec<Entity> = world.query_filtered::<Entity, With<Plate>>().iter(world).collect();
+        for e in old {
+            world.despawn(e);
+        }
+        world.resource_mut::<Crust>().plate = plate_of_sample;
+        for &(id, motion) in motions {
+            world.spawn((
+                Plate { id: crate::components::PlateId(id) },
+                motion,
+                PlateFrame::default(),
+                PlateMesh::default(),
+                PlateBounds { centroid: glam::DVec3::Z, cap_radius_rad: std::f64::consts::PI },
+                PlateStats::default(),
+            ));
+        }
+        let next = ids.last().map_or(0, |m| m + 1).max(world.resource::<NextPlateId>().0);
+        world.resource_mut::<NextPlateId>().0 = next;
+        resample::rebuild_plate_entities(world, &[]);
+        self.refresh_stats();
+        Ok(())
+    }
+
+    /// Sets the motion of plate `id`.
+    pub fn set_plate_motion(&mut self, id: u32, motion: PlateMotion) -> Result<(), SimError> {
+        let world = self.app.world_mut();
+        let mut q = world.query::<(&Plate, &mut PlateMotion)>();
+        for (p, mut m) in q.iter_mut(world) {
+            if p.id.0 == id {
+                *m = motion;
+                return Ok(());
+            }
+        }
+        Err(SimError::BadArgument(format!("no plate with id {id}")))
+    }
+
     /// A snapshot of every plate's frame and motion, sorted by id.
     pub fn plate_table(&mut self) -> PlateTable {
         let world = self.app.world_mut();

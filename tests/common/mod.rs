@@ -1,0 +1,80 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use tectonic_planets::geometry::SphereMesh;
+use tectonic_planets::prelude::*;
+
+/// Default parameters at a given resolution and seed.
+pub fn params(samples: u64, seed: u64) -> Params {
+    let mut p = Params::default();
+    p.planet.samples = samples;
+    p.planet.seed = seed;
+    p
+}
+
+/// Area of the samples selected by `pick`, km².
+pub fn area_where(mesh: &SphereMesh, pick: impl Fn(usize) -> bool) -> f64 {
+    (0..mesh.len()).filter(|&i| pick(i)).map(|i| mesh.area_km2[i]).sum()
+}
+
+/// Continental area of a crust, km².
+pub fn continental_area(mesh: &SphereMesh, crust: &Crust) -> f64 {
+    area_where(mesh, |i| crust.crust_type[i] == CrustType::Continental)
+}
+
+/// Spearman rank correlation of two equally long samples.
+pub fn spearman(a: &[f64], b: &[f64]) -> f64 {
+    fn ranks(v: &[f64]) -> Vec<f64> {
+        let mut idx: Vec<usize> = (0..v.len()).collect();
+        idx.sort_by(|&i, &j| v[i].total_cmp(&v[j]));
+        let mut r = vec![0.0; v.len()];
+        let mut k = 0;
+        while k < idx.len() {
+            let mut e = k;
+            while e + 1 < idx.len() && v[idx[e + 1]] == v[idx[k]] {
+                e += 1;
+            }
+            let avg = (k + e) as f64 / 2.0;
+            for &i in &idx[k..=e] {
+                r[i] = avg;
+            }
+            k = e + 1;
+        }
+        r
+    }
+    let (ra, rb) = (ranks(a), ranks(b));
+    let n = a.len() as f64;
+    let (ma, mb) = (ra.iter().sum::<f64>() / n, rb.iter().sum::<f64>() / n);
+    let cov: f64 = ra.iter().zip(&rb).map(|(x, y)| (x - ma) * (y - mb)).sum();
+    let va: f64 = ra.iter().map(|x| (x - ma).powi(2)).sum();
+    let vb: f64 = rb.iter().map(|y| (y - mb).powi(2)).sum();
+    cov / (va * vb).sqrt()
+}
+
+/// Connected pieces of the samples with `same(i, j)`, as lists of sample indices.
+pub fn components(mesh: &SphereMesh, member: impl Fn(usize) -> bool, same: impl Fn(usize, usize) -> bool) -> Vec<Vec<usize>> {
+    let n = mesh.len();
+    let mut seen = vec![false; n];
+    let mut out = Vec::new();
+    for s in 0..n {
+        if seen[s] || !member(s) {
+            continue;
+        }
+        let mut comp = vec![s];
+        seen[s] = true;
+        let mut k = 0;
+        while k < comp.len() {
+            let u = comp[k];
+            k += 1;
+            for &v in mesh.neighbors_of(u) {
+                let v = v as usize;
+                if !seen[v] && member(v) && same(u, v) {
+                    seen[v] = true;
+                    comp.push(v);
+                }
+            }
+        }
+        out.push(comp);
+    }
+    out
+}

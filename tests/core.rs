@@ -1,0 +1,344 @@
+//! Scenario tests of the planet core: resampling identities, co-moving plates, divergence and
+//! new ocean floor, drift of continents, plate connectivity, determinism and resolution
+//! independence.
+
+mod common;
+
+use common::*;
+use glam::{DQuat, DVec3};
+use tectonic_planets::geometry::angle_between;
+use tectonic_planets::io::maps::SphereField;
+use tectonic_planets::io::summary::CrustSampler;
+use tectonic_planets::prelude::*;
+
+fn at_rest() -> PlateMotion {
+    PlateMotion { euler_pole: DVec3::Z, angular_speed_rad_per_my: 0.0 }
+}
+
+#[test]
+fn resampling_at_rest_is_the_identity() {
+    let mut sim = Simulation::new(params(30_000, 5)).unwrap();
+    for name in ["erosion", "aging"] {
+        sim.set_enabled(name, false).unwrap();
+    }
+    let ids: Vec<u32> = sim.plate_table().plates.iter().map(|p| p.id).collect();
+    for id in ids {
+        sim.set_plate_motion(id, at_rest()).unwrap();
+    }
+    let before = sim.crust().clone();
+    let resamplings = sim.clock().resamplings;
+    for _ in 0..10 {
+        sim.request_resample();
+        sim.step().unwrap();
+    }
+    assert_eq!(sim.clock().resamplings, resamplings + 10, "ten resamplings ran");
+    let after = sim.crust();
+    assert_eq!(before.plate, after.plate, "plate ids changed at rest");
+    assert_eq!(before.crust_type, after.crust_type, "crust types changed at rest");
+    let worst = before.elevation_km.iter().zip(&after.elevation_km).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    assert!(worst <= 1e-6, "elevation moved by {worst} km at rest");
+}
+
+#[test]
+fn plates_turning_together_keep_their_continents() {
+    let mut p = params(100_000, 3);
+    p.resample.min_interval_steps = 10;
+    p.resample.max_interval_steps = 10;
+    let mut sim = Simulation::new(p).unwrap();
+    // Erosion lowers coasts for reasons of its own; this test is about moving and resampling.
+    sim.set_enabled("erosion", false).unwrap();
+    let pole = DVec3::new(0.3, -0.5, 0.8).normalize();
+    let omega = 60.0 / 6370.0; // 60 mm/yr at the pole's equator
+    let ids: Vec<u32> = sim.plate_table().plates.iter().map(|p| p.id).collect();
+    for id in ids {
+        sim.set_plate_motion(id, PlateMotion { euler_pole: pole, angular_speed_rad_per_my: omega }).unwrap();
+    }
+    let initial = sim.crust().clone();
+    let mesh = sim.mesh().clone();
+    let area0 = continental_area(&mesh, &initial);
+    sim.run_steps(50).unwrap();
+    assert_eq!(sim.clock().steps_since_resample, 0, "the run ends on a resampling");
+    assert!(sim.clock().resamplings >= 5);
+    let area1 = continental_area(&mesh, sim.crust());
+    let change = (area1 - area0).abs() / area0;
+    assert!(change < 0.01, "continental area changed by {:.2}%", change * 100.0);
+    // Land mask against the rotated initial mask.
+    let turned = DQuat::from_axis_angle(pole, omega * sim.time_my());
+    let sampler = CrustSampler { mesh: &mesh, crust: &initial };
+    let agree = area_where(&mesh, |i| {
+        let back = turned.inverse() * mesh.positions[i];
+        let was_land = sampler.sample(back.to_array()).elevation_m > 0.0;
+        was_land == (sim.crust().elevation_km[i] > 0.0)
+    });
+    let frac = agree / mesh.total_area_km2();
+    assert!(frac >= 0.98, "land mask agrees on only {:.2}% of the area", frac * 100.0);
+}
+
+/// Northern and southern hemispheres turning apart about an axis on the equator: the gap opens
+/// on the x < 0 side (and the plates converge on the other).
+#[test]
+fn diverging_hemispheres_make_a_ridge() {
+    let mut p = params(100_000, 9);
+    p.init.continental_fraction = 0.0;
+    p.resample.min_interval_steps = 1000;
+    p.resample.max_interval_steps = 1000;
+    let mut sim = Simulation::new(p).unwrap();
+    let mesh = sim.mesh().clone();
+    let north: Vec<u32> = mesh.positions.iter().map(|q| if q.z >= 0.0 { 0 } else { 1 }).collect();
+    let omega = 50.0 / 6370.0;
+    let m_north = PlateMotion { euler_pole: DVec3::Y, angular_speed_rad_per_my: omega };
+    let m_south = PlateMotion { euler_pole: -DVec3::Y, angular_speed_rad_per_my: omega };
+    sim.reassign_plates(north, &[(0, m_north), (1, m_south)]).unwrap();
+    // Mark the old crust as very old, so that new crust is recognisable by its age.
+    sim.world_mut().resource_mut::<Crust>().age_my.iter_mut().for_each(|a| *a = 1000.0);
+    sim.run_steps(20).unwrap();
+    let t_my = sim.time_my();
+    sim.request_resample();
+    sim.step().unwrap();
+    let crust = sim.crust().clone();
+    let spacing = mesh.mean_spacing_rad();
+    // Where each plate's original half now lies: a point is in the gap when, turned back by
+    // each plate's motion, it falls outside that plate's half.
+    let turn_n = DQuat::from_axis_angle(DVec3::Y, omega * t_my);
+    let turn_s = DQuat::from_axis_angle(-DVec3::Y, omega * t_my);
+    let mut ages = Vec::new();
+    let mut dists = Vec::new();
+    let mut young_elev = Vec::new();
+    for i in 0..mesh.len() {
+        let q = mesh.positions[i];
+        let zn = (turn_n.inverse() * q).z; // < 0: outside the northern plate
+        let zs = (turn_s.inverse() * q).z; // > 0: outside the southern plate
+        let dn = (-zn).asin(); // signed angle outside the northern half
+        let ds = zs.asin();
+        let new_crust = crust.age_my[i] < 500.0;
+        let deep_in_gap = dn > 2.0 * spacing && ds > 2.0 * spacing;
+        let clearly_covered = dn < -2.0 * spacing || ds < -2.0 * spacing;
+        if clearly_covered {
+            assert!(!new_crust, "new crust outside the gap at sample {i} ({q:?})");
+        }
+        if deep_in_gap {
+            assert!(new_crust, "old crust left inside the gap at sample {i}");
+            // Distance from the ridge, which lies halfway between the two plates.
+            ages.push(crust.age_my[i] as f64);
+            dists.push((dn - ds).abs() * 0.5);
+            if crust.age_my[i] < 0.1 * t_my as f32 {
+                young_elev.push(crust.elevation_km[i]);
+            }
+        }
+    }
+    assert!(ages.len() > 500, "the gap has {} samples", ages.len());
+    let rho = spearman(&ages, &dists);
+    assert!(rho >= 0.9, "age vs distance to ridge: Spearman {rho:.3}");
+    let mean_young = young_elev.iter().sum::<f32>() / young_elev.len() as f32;
+    assert!((mean_young + 1.0).abs() < 0.3, "crust at the ridge sits at {mean_young} km");
+    // Elevation falls away from the ridge.
+    let elev: Vec<f64> = (0..mesh.len())
+        .filter(|&i| crust.age_my[i] < 500.0)
+        .map(|i| crust.elevation_km[i] as f64)
+        .collect();
+    let age: Vec<f64> = (0..mesh.len()).filter(|&i| crust.age_my[i] < 500.0).map(|i| crust.age_my[i] as f64).collect();
+    assert!(spearman(&elev, &age) < -0.8, "elevation does not fall with age");
+    let rd = crust.ridge_dir.iter().zip(&crust.age_my).filter(|(_, a)| **a < 500.0).filter(|(r, _)| r.iter().any(|c| *c != 0.0)).count();
+    assert!(rd * 10 > ages.len() * 9, "ridge directions recorded on new crust");
+}
+
+#[test]
+fn continents_move_with_their_plates() {
+    let mut sim = Simulation::new(params(100_000, 11)).unwrap();
+    let mesh = sim.mesh().clone();
+    let c0 = sim.crust().clone();
+    let table0 = sim.plate_table();
+    let continents = components(
+        &mesh,
+        |i| c0.crust_type[i] == CrustType::Continental,
+        |a, b| c0.plate[a] == c0.plate[b],
+    );
+    let centroid = |idx: &[usize]| -> (DVec3, f64) {
+        let mut s = DVec3::ZERO;
+        let mut a = 0.0;
+        for &i in idx {
+            s += mesh.positions[i] * mesh.area_km2[i];
+            a += mesh.area_km2[i];
+        }
+        (s.normalize(), a)
+    };
+    let mut tracked: Vec<(u32, DVec3, f64)> = continents
+        .iter()
+        .map(|c| {
+            let (cen, area) = centroid(c);
+            (c0.plate[c[0]], cen, area)
+        })
+        .filter(|c| c.2 > 1.0e6)
+        .collect();
+    tracked.sort_by(|a, b| b.2.total_cmp(&a.2));
+    sim.run_steps(50).unwrap();
+    let t = sim.time_my();
+    let view = sim.resampled_crust();
+    let mut checked = 0;
+    for (plate, start, area) in tracked {
+        let m = table0.get(plate).unwrap().motion;
+        let predicted = DQuat::from_axis_angle(m.euler_pole, m.angular_speed_rad_per_my * t) * start;
+        let displacement = angle_between(start, predicted);
+        if displacement < 0.05 {
+            continue; // too slow to say anything
+        }
+        // The continental piece of the same plate nearest to the prediction.
+        let nearest = (0..mesh.len())
+            .filter(|&i| view.crust_type[i] == CrustType::Continental && view.plate[i] == plate)
+            .min_by(|&a, &b| angle_between(mesh.positions[a], predicted).total_cmp(&angle_between(mesh.positions[b], predicted)));
+        let Some(seed) = nearest else { continue };
+        let piece = components(&mesh, |i| view.crust_type[i] == CrustType::Continental && view.plate[i] == plate, |_, _| true)
+            .into_iter()
+            .find(|c| c.contains(&seed))
+            .unwrap();
+        let (now, now_area) = centroid(&piece);
+        if (now_area - area).abs() > 0.05 * area {
+            continue; // eaten or grown by the overlap rule: its centre moved for another reason
+        }
+        let err = angle_between(now, predicted);
+        assert!(err <= 0.1 * displacement, "continent of plate {plate}: off by {:.0} km of {:.0} km", err * 6370.0, displacement * 6370.0);
+        checked += 1;
+    }
+    assert!(checked >= 1, "no continent kept its shape long enough to check");
+}
+
+#[test]
+fn default_planet_after_250_my_is_healthy() {
+    let mut sim = Simulation::new(Params::default()).unwrap();
+    sim.run_for(250.0).unwrap();
+    let mesh = sim.mesh().clone();
+    sim.crust().check_finite().unwrap();
+    // The planet as it looks at 250 My: every plate that shows is in one piece.
+    let view = sim.resampled_crust();
+    view.check_finite().unwrap();
+    let mut shown: Vec<u32> = view.plate.clone();
+    shown.sort_unstable();
+    shown.dedup();
+    for &id in &shown {
+        let total = area_where(&mesh, |i| view.plate[i] == id);
+        let largest = components(&mesh, |i| view.plate[i] == id, |_, _| true)
+            .iter()
+            .map(|c| c.iter().map(|&i| mesh.area_km2[i]).sum::<f64>())
+            .fold(0.0, f64::max);
+        assert!(largest >= 0.99 * total, "plate {id} at 250 My: largest piece holds {:.1}%", 100.0 * largest / total);
+    }
+    // And after the resampling that follows, the state itself: no empty plate, no stray piece.
+    sim.request_resample();
+    sim.step().unwrap();
+    let view = sim.crust().clone();
+    view.check_finite().unwrap();
+    let table = sim.plate_table();
+    assert!(!table.is_empty());
+    for p in &table.plates {
+        let total = area_where(&mesh, |i| view.plate[i] == p.id);
+        assert!(total > 0.0, "plate {} is empty", p.id);
+        let largest = components(&mesh, |i| view.plate[i] == p.id, |_, _| true)
+            .iter()
+            .map(|c| c.iter().map(|&i| mesh.area_km2[i]).sum::<f64>())
+            .fold(0.0, f64::max);
+        assert!(largest >= 0.99 * total, "plate {}: largest piece holds {:.1}%", p.id, 100.0 * largest / total);
+    }
+    for &id in &view.plate {
+        assert!(table.get(id).is_some(), "sample owned by plate {id}, which has no entity");
+    }
+    for p in &table.plates {
+        let e = sim.world_mut().query::<(&Plate, &PlateMesh)>().iter(sim.world()).find(|(q, _)| q.id.0 == p.id).map(|(_, m)| m.samples.len());
+        assert!(e.unwrap_or(0) > 0, "plate entity {} without samples", p.id);
+    }
+}
+
+#[test]
+fn same_seed_same_bits_with_one_thread_or_two() {
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| {
+            let mut p = params(40_000, 21);
+            p.resample.min_interval_steps = 7;
+            p.resample.max_interval_steps = 7;
+            let mut sim = Simulation::new(p).unwrap();
+            sim.run_steps(30).unwrap();
+            (sim.state_hash(), sim.crust().hash())
+        })
+    };
+    let one = run(1);
+    let two = run(2);
+    assert_eq!(one, two);
+    // And a different seed gives a different planet.
+    let mut sim = Simulation::new(params(40_000, 22)).unwrap();
+    assert_ne!(sim.state_hash(), Simulation::new(params(40_000, 21)).unwrap().state_hash());
+}
+
+#[test]
+fn initial_plates_do_not_depend_on_resolution() {
+    let mut a = Simulation::new(params(50_000, 4)).unwrap();
+    let mut b = Simulation::new(params(200_000, 4)).unwrap();
+    let ma = a.plate_table();
+    let mb = b.plate_table();
+    let sa = CrustSampler { mesh: a.mesh(), crust: a.crust() };
+    let sb = CrustSampler { mesh: b.mesh(), crust: b.crust() };
+    let (w, h) = (720, 360);
+    let (mut same, mut total) = (0.0, 0.0);
+    let (mut same_land, mut total_land) = (0.0, 0.0);
+    for r in 0..h {
+        let lat = 90.0 - 180.0 * (r as f64 + 0.5) / h as f64;
+        let weight = lat.to_radians().cos();
+        for c in 0..w {
+            let lon = -180.0 + 360.0 * (c as f64 + 0.5) / w as f64;
+            let q = tectonic_planets::geometry::from_lat_lon_deg(lat, lon).to_array();
+            let (x, y) = (sa.sample(q), sb.sample(q));
+            total += weight;
+            if x.plate == y.plate {
+                same += weight;
+            }
+            total_land += weight;
+            if x.continental == y.continental {
+                same_land += weight;
+            }
+        }
+    }
+    assert!(same / total >= 0.97, "plate maps agree on {:.2}%", 100.0 * same / total);
+    assert!(same_land / total_land >= 0.95, "continent maps agree on {:.2}%", 100.0 * same_land / total_land);
+    assert_eq!(ma.plates.len(), mb.plates.len());
+    for (x, y) in ma.plates.iter().zip(&mb.plates) {
+        assert_eq!(x.motion, y.motion, "plate {} moves differently", x.id);
+    }
+}
+
+#[test]
+fn disabling_a_phenomenon_stops_it() {
+    let mut on = Simulation::new(params(20_000, 2)).unwrap();
+    let mut off = Simulation::new(params(20_000, 2)).unwrap();
+    off.set_enabled("erosion", false).unwrap();
+    on.run_steps(3).unwrap();
+    off.run_steps(3).unwrap();
+    assert_ne!(on.crust().elevation_km, off.crust().elevation_km);
+    // Aging still ran in both.
+    assert_eq!(on.crust().age_my, off.crust().age_my);
+    assert!(off.set_enabled("no_such_thing", false).is_err());
+}
+
+#[test]
+fn a_user_can_replace_a_builtin_plugin() {
+    #[derive(Resource, Default)]
+    struct Calls(u32);
+    struct MyErosion;
+    impl Plugin for MyErosion {
+        fn build(&self, app: &mut App) {
+            app.init_resource::<Calls>();
+            app.register_phenomenon("my_erosion", TectonicSystems::Erosion, "counts its calls");
+            app.add_systems(
+                TectonicStep,
+                (|mut c: ResMut<Calls>| c.0 += 1).in_set(TectonicSystems::Erosion).run_if(phenomenon_enabled("my_erosion")),
+            );
+        }
+    }
+    let plugins = TectonicPlugins.build().disable::<ErosionPlugin>().add(MyErosion);
+    let mut sim = Simulation::with_plugins(params(10_000, 1), plugins).unwrap();
+    let names: Vec<&str> = sim.phenomena().iter().map(|p| p.name).collect();
+    assert!(names.contains(&"my_erosion") && !names.contains(&"erosion"), "{names:?}");
+    sim.run_steps(4).unwrap();
+    assert_eq!(sim.world().resource::<Calls>().0, 4);
+    sim.set_enabled("my_erosion", false).unwrap();
+    sim.run_steps(2).unwrap();
+    assert_eq!(sim.world().resource::<Calls>().0, 4);
+}

@@ -19,12 +19,15 @@ pub use simulation::{SimError, Simulation};
 
 /// What a user or plugin author imports.
 pub mod prelude {
-    pub use crate::components::{Plate, PlateBounds, PlateFrame, PlateId, PlateMesh, PlateMotion, PlateStats};
+    pub use crate::components::{
+        Plate, PlateBounds, PlateFrame, PlateId, PlateMesh, PlateMotion, PlateStats,
+    };
     pub use crate::geometry::SphereMesh;
     pub use crate::io::params::{ParamError, ParamValue, Params};
     pub use crate::plugins::{
-        AgingPlugin, DiagnosticsPlugin, DriftPlugin, ErosionPlugin, OceanicCrustPlugin, PhenomenonAppExt,
-        ResamplePlugin, ResampleSystems, TectonicPlugins, TectonicStep, TectonicSystems,
+        AgingPlugin, DiagnosticsPlugin, DriftPlugin, ErosionPlugin, OceanicCrustPlugin,
+        PhenomenonAppExt, ResamplePlugin, ResampleSystems, TectonicPlugins, TectonicStep,
+        TectonicSystems,
     };
     pub use crate::resources::{Crust, CrustType, Orogeny, Phenomena, phenomenon_enabled};
     pub use crate::simulation::{SimError, Simulation};

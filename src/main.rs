@@ -6,14 +6,18 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
+use tectonic_planets::Simulation;
 use tectonic_planets::io::maps::{Raster, write_all_maps};
 use tectonic_planets::io::params::{ParamValue, Params};
 use tectonic_planets::io::summary::{CrustSampler, summarize};
 use tectonic_planets::plugins::TectonicSystems;
-use tectonic_planets::Simulation;
 
 #[derive(Parser)]
-#[command(name = "planet", version, about = "Procedural tectonic planet generator")]
+#[command(
+    name = "planet",
+    version,
+    about = "Procedural tectonic planet generator"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -92,8 +96,12 @@ struct BenchArgs {
 }
 
 fn main() {
-    let filter = tracing_subscriber::EnvFilter::try_from_env("PLANET_LOG").unwrap_or_else(|_| "warn".into());
-    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    let filter =
+        tracing_subscriber::EnvFilter::try_from_env("PLANET_LOG").unwrap_or_else(|_| "warn".into());
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .init();
     if let Err(e) = run(Cli::parse()) {
         eprintln!("error: {e:#}");
         std::process::exit(1);
@@ -118,7 +126,13 @@ fn run(cli: Cli) -> Result<()> {
             let sim = Simulation::new(params)?;
             println!("{:<16} {:<12} {:<4} description", "name", "set", "on");
             for p in sim.phenomena() {
-                println!("{:<16} {:<12} {:<4} {}", p.name, p.set.name(), if p.enabled { "yes" } else { "no" }, p.description);
+                println!(
+                    "{:<16} {:<12} {:<4} {}",
+                    p.name,
+                    p.set.name(),
+                    if p.enabled { "yes" } else { "no" },
+                    p.description
+                );
             }
             Ok(())
         }
@@ -132,7 +146,9 @@ fn load_params(a: &PlanetArgs) -> Result<Params> {
         Some(p) => Params::load(p)?,
         None => Params::default(),
     };
-    let set = |params: &mut Params, key: &str, v: ParamValue| params.set(key, v).map_err(anyhow::Error::from);
+    let set = |params: &mut Params, key: &str, v: ParamValue| {
+        params.set(key, v).map_err(anyhow::Error::from)
+    };
     if let Some(s) = a.seed {
         set(&mut params, "planet.seed", ParamValue::Int(s))?;
     }
@@ -143,7 +159,11 @@ fn load_params(a: &PlanetArgs) -> Result<Params> {
         set(&mut params, "init.plates", ParamValue::Int(p))?;
     }
     if let Some(f) = a.continental_fraction {
-        set(&mut params, "init.continental_fraction", ParamValue::Float(f))?;
+        set(
+            &mut params,
+            "init.continental_fraction",
+            ParamValue::Float(f),
+        )?;
     }
     params.validate()?;
     Ok(params)
@@ -154,7 +174,10 @@ fn setup_threads(threads: Option<usize>) -> Result<()> {
         if n == 0 {
             bail!("--threads must be at least 1");
         }
-        rayon::ThreadPoolBuilder::new().num_threads(n).build_global().context("could not start the thread pool")?;
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .context("could not start the thread pool")?;
     }
     Ok(())
 }
@@ -174,30 +197,53 @@ fn build_sim(a: &PlanetArgs) -> Result<Simulation> {
 
 fn generate(a: GenerateArgs) -> Result<()> {
     if !a.my.is_finite() || a.my < 0.0 {
-        bail!("--my must be a finite, non-negative number of million years, got {}", a.my);
+        bail!(
+            "--my must be a finite, non-negative number of million years, got {}",
+            a.my
+        );
     }
-    if a.width < 2 || a.width > 16384 || a.width % 2 != 0 {
-        bail!("--width must be an even number between 2 and 16384, got {}", a.width);
+    if a.width < 2 || a.width > 16384 || !a.width.is_multiple_of(2) {
+        bail!(
+            "--width must be an even number between 2 and 16384, got {}",
+            a.width
+        );
     }
     prepare_out_dir(&a.out)?;
     let started = Instant::now();
     let mut sim = build_sim(&a.planet)?;
     let steps = sim.steps_for(a.my)?;
-    let bar = if a.quiet { ProgressBar::hidden() } else { ProgressBar::new(steps) };
+    let bar = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(steps)
+    };
     bar.set_style(
-        ProgressStyle::with_template("{spinner} [{bar:40}] {pos}/{len} steps  {msg}  {per_sec}  left {eta}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{spinner} [{bar:40}] {pos}/{len} steps  {msg}  {per_sec}  left {eta}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
     );
     let dt = sim.params().time.time_step_my;
     for k in 0..steps {
         sim.step()?;
-        bar.set_message(format!("{:.0}/{:.0} My", (k + 1) as f64 * dt, steps as f64 * dt));
+        bar.set_message(format!(
+            "{:.0}/{:.0} My",
+            (k + 1) as f64 * dt,
+            steps as f64 * dt
+        ));
         bar.inc(1);
     }
     bar.finish_and_clear();
     let view = sim.resampled_crust();
-    let raster = Raster::sample(&CrustSampler { mesh: sim.mesh(), crust: &view }, a.width, a.width / 2)?;
+    let raster = Raster::sample(
+        &CrustSampler {
+            mesh: sim.mesh(),
+            crust: &view,
+        },
+        a.width,
+        a.width / 2,
+    )?;
     let files = write_all_maps(&raster, &a.out, sim.params().planet.radius_km)?;
     let summary = summarize(&sim, &view);
     let summary_path = a.out.join("summary.json");
@@ -224,7 +270,8 @@ fn prepare_out_dir(dir: &Path) -> Result<()> {
     if dir.exists() && !dir.is_dir() {
         bail!("output path {} exists and is not a folder", dir.display());
     }
-    std::fs::create_dir_all(dir).with_context(|| format!("could not create output folder {}", dir.display()))
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("could not create output folder {}", dir.display()))
 }
 
 /// Peak resident memory of this process (VmHWM), bytes, where the OS tells.
@@ -240,11 +287,25 @@ fn bench(a: BenchArgs) -> Result<()> {
     let mut sim = build_sim(&a.planet)?;
     let build = t0.elapsed();
     let n = sim.mesh().len();
-    println!("planet bench: {} samples, {} plates, {} steps, {} threads", n, sim.stats().plates, a.steps, rayon::current_num_threads());
+    println!(
+        "planet bench: {} samples, {} plates, {} steps, {} threads",
+        n,
+        sim.stats().plates,
+        a.steps,
+        rayon::current_num_threads()
+    );
     let ms = |d: Option<Duration>| d.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
     println!("{:<28} {:>10.1} ms", "mesh", ms(sim.timings().last("mesh")));
-    println!("{:<28} {:>10.1} ms", "initial planet", ms(sim.timings().last("initial_planet")));
-    println!("{:<28} {:>10.1} ms", "mesh + initial planet", build.as_secs_f64() * 1e3);
+    println!(
+        "{:<28} {:>10.1} ms",
+        "initial planet",
+        ms(sim.timings().last("initial_planet"))
+    );
+    println!(
+        "{:<28} {:>10.1} ms",
+        "mesh + initial planet",
+        build.as_secs_f64() * 1e3
+    );
     let mut step_ms = Vec::new();
     for _ in 0..a.steps {
         let s = Instant::now();
@@ -266,12 +327,30 @@ fn bench(a: BenchArgs) -> Result<()> {
     }
     println!("{:<28} {:>10.3} ms", "all sets but resample", per_step_sum);
     step_ms.sort_by(f64::total_cmp);
-    println!("{:<28} {:>10.3} ms", "whole step (median)", step_ms.get(step_ms.len() / 2).copied().unwrap_or(f64::NAN));
-    println!("{:<28} {:>10.1} ms", "one resampling (median)", sim.timings().median_ms("resampling").unwrap_or(f64::NAN));
+    println!(
+        "{:<28} {:>10.3} ms",
+        "whole step (median)",
+        step_ms.get(step_ms.len() / 2).copied().unwrap_or(f64::NAN)
+    );
+    println!(
+        "{:<28} {:>10.1} ms",
+        "one resampling (median)",
+        sim.timings().median_ms("resampling").unwrap_or(f64::NAN)
+    );
     let state = sim.state_bytes();
-    println!("{:<28} {:>10.1} MB  ({:.0} bytes/sample)", "simulation state", state as f64 / 1e6, state as f64 / n as f64);
+    println!(
+        "{:<28} {:>10.1} MB  ({:.0} bytes/sample)",
+        "simulation state",
+        state as f64 / 1e6,
+        state as f64 / n as f64
+    );
     if let Some(peak) = peak_rss_bytes() {
-        println!("{:<28} {:>10.1} MB  ({:.0} bytes/sample)", "peak memory (VmHWM)", peak as f64 / 1e6, peak as f64 / n as f64);
+        println!(
+            "{:<28} {:>10.1} MB  ({:.0} bytes/sample)",
+            "peak memory (VmHWM)",
+            peak as f64 / 1e6,
+            peak as f64 / n as f64
+        );
     }
     Ok(())
 }

@@ -57,7 +57,9 @@ pub struct SimRng {
 impl SimRng {
     /// A generator for `seed` and a named stream.
     pub fn new(seed: u64, stream: u64) -> Self {
-        Self { state: hash3(seed, stream, 0) }
+        Self {
+            state: hash3(seed, stream, 0),
+        }
     }
     /// Next 64 random bits.
     pub fn next_u64(&mut self) -> u64 {
@@ -78,13 +80,26 @@ fn fade(t: f64) -> f64 {
 #[inline]
 fn lattice_gradient(seed: u64, x: i64, y: i64, z: i64) -> DVec3 {
     let h = mix64(
-        seed ^ mix64((x as u64).wrapping_mul(0x8da6_b343) ^ (y as u64).wrapping_mul(0xd816_3841) ^ (z as u64).wrapping_mul(0xcb1a_b31f)),
+        seed ^ mix64(
+            (x as u64).wrapping_mul(0x8da6_b343)
+                ^ (y as u64).wrapping_mul(0xd816_3841)
+                ^ (z as u64).wrapping_mul(0xcb1a_b31f),
+        ),
     );
     // 12 edge directions of a cube (improved Perlin noise), chosen by hash.
     const G: [[f64; 3]; 12] = [
-        [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0], [1.0, -1.0, 0.0], [-1.0, -1.0, 0.0],
-        [1.0, 0.0, 1.0], [-1.0, 0.0, 1.0], [1.0, 0.0, -1.0], [-1.0, 0.0, -1.0],
-        [0.0, 1.0, 1.0], [0.0, -1.0, 1.0], [0.0, 1.0, -1.0], [0.0, -1.0, -1.0],
+        [1.0, 1.0, 0.0],
+        [-1.0, 1.0, 0.0],
+        [1.0, -1.0, 0.0],
+        [-1.0, -1.0, 0.0],
+        [1.0, 0.0, 1.0],
+        [-1.0, 0.0, 1.0],
+        [1.0, 0.0, -1.0],
+        [-1.0, 0.0, -1.0],
+        [0.0, 1.0, 1.0],
+        [0.0, -1.0, 1.0],
+        [0.0, 1.0, -1.0],
+        [0.0, -1.0, -1.0],
     ];
     let g = G[(h % 12) as usize];
     DVec3::new(g[0], g[1], g[2])

@@ -24,8 +24,8 @@ use crate::io::params::{ParamError, Params};
 use crate::plugins::{TectonicPlugins, TectonicSchedulePlugin, TectonicStep};
 use crate::random::StableHasher;
 use crate::resources::{
-    Crust, CrustStats, NextPlateId, NonFinite, Phenomena, PhenomenonInfo, PlateTable, ResampleRequest, SimClock,
-    StepTimings,
+    Crust, CrustStats, NextPlateId, NonFinite, Phenomena, PhenomenonInfo, PlateTable,
+    ResampleRequest, SimClock, StepTimings,
 };
 use crate::systems::diagnostics::{CrustHealth, crust_stats};
 use crate::systems::{init, oceanic_crust, resample};
@@ -79,7 +79,10 @@ impl Simulation {
         let next_id = plates.iter().map(|p| p.id.0 + 1).max().unwrap_or(0);
 
         let mut app = App::empty();
-        app.insert_resource(params).insert_resource(mesh).insert_resource(crust).insert_resource(NextPlateId(next_id));
+        app.insert_resource(params)
+            .insert_resource(mesh)
+            .insert_resource(crust)
+            .insert_resource(NextPlateId(next_id));
         app.add_plugins(TectonicSchedulePlugin);
         app.add_plugins(plugins);
         app.finish();
@@ -91,7 +94,10 @@ impl Simulation {
                 p.motion,
                 PlateFrame::default(),
                 PlateMesh::default(),
-                PlateBounds { centroid: glam::DVec3::Z, cap_radius_rad: std::f64::consts::PI },
+                PlateBounds {
+                    centroid: glam::DVec3::Z,
+                    cap_radius_rad: std::f64::consts::PI,
+                },
                 PlateStats::default(),
             ));
         }
@@ -116,7 +122,10 @@ impl Simulation {
         self.app.world_mut().run_schedule(TectonicStep);
         let world = self.app.world();
         if let Some(e) = world.resource::<CrustHealth>().0.clone() {
-            return Err(SimError::NonFinite { step: world.resource::<SimClock>().step, source: e });
+            return Err(SimError::NonFinite {
+                step: world.resource::<SimClock>().step,
+                source: e,
+            });
         }
         Ok(())
     }
@@ -133,7 +142,9 @@ impl Simulation {
     pub fn steps_for(&self, my: f64) -> Result<u64, SimError> {
         let dt = self.params().time.time_step_my;
         if !my.is_finite() || my < 0.0 {
-            return Err(SimError::BadArgument(format!("time {my} My is not a finite, non-negative number")));
+            return Err(SimError::BadArgument(format!(
+                "time {my} My is not a finite, non-negative number"
+            )));
         }
         Ok((my / dt).round() as u64)
     }
@@ -151,12 +162,21 @@ impl Simulation {
 
     /// Switches a phenomenon on or off (takes effect from the next step).
     pub fn set_enabled(&mut self, name: &str, enabled: bool) -> Result<(), SimError> {
-        self.app.world_mut().resource_mut::<Phenomena>().set_enabled(name, enabled).map_err(SimError::UnknownPhenomenon)
+        self.app
+            .world_mut()
+            .resource_mut::<Phenomena>()
+            .set_enabled(name, enabled)
+            .map_err(SimError::UnknownPhenomenon)
     }
 
     /// Every registered phenomenon and whether it is on.
     pub fn phenomena(&self) -> Vec<PhenomenonInfo> {
-        self.app.world().resource::<Phenomena>().iter().cloned().collect()
+        self.app
+            .world()
+            .resource::<Phenomena>()
+            .iter()
+            .cloned()
+            .collect()
     }
 
     /// The parameters.
@@ -204,9 +224,15 @@ impl Simulation {
     /// `motions` the motion of every plate it names (ids are free to choose). Only allowed right
     /// after a resampling (every frame at identity), e.g. at the start or after
     /// [`Self::request_resample`] and a step; used to author scenarios.
-    pub fn reassign_plates(&mut self, plate_of_sample: Vec<u32>, motions: &[(u32, PlateMotion)]) -> Result<(), SimError> {
+    pub fn reassign_plates(
+        &mut self,
+        plate_of_sample: Vec<u32>,
+        motions: &[(u32, PlateMotion)],
+    ) -> Result<(), SimError> {
         if self.clock().steps_since_resample != 0 {
-            return Err(SimError::BadArgument("plates can only be reassigned right after a resampling".into()));
+            return Err(SimError::BadArgument(
+                "plates can only be reassigned right after a resampling".into(),
+            ));
         }
         if plate_of_sample.len() != self.mesh().len() {
             return Err(SimError::BadArgument(format!(
@@ -218,28 +244,47 @@ impl Simulation {
         let mut ids: Vec<u32> = motions.iter().map(|m| m.0).collect();
         ids.sort_unstable();
         if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
-            return Err(SimError::BadArgument(format!("plate {} has two motions", w[0])));
+            return Err(SimError::BadArgument(format!(
+                "plate {} has two motions",
+                w[0]
+            )));
         }
-        if let Some(&bad) = plate_of_sample.iter().find(|p| ids.binary_search(p).is_err()) {
-            return Err(SimError::BadArgument(format!("plate {bad} is used by a sample but has no motion")));
+        if let Some(&bad) = plate_of_sample
+            .iter()
+            .find(|p| ids.binary_search(p).is_err())
+        {
+            return Err(SimError::BadArgument(format!(
+                "plate {bad} is used by a sample but has no motion"
+            )));
         }
         let world = self.app.world_mut();
-        let old: Vec<Entity> = world.query_filtered::<Entity, With<Plate>>().iter(world).collect();
+        let old: Vec<Entity> = world
+            .query_filtered::<Entity, With<Plate>>()
+            .iter(world)
+            .collect();
         for e in old {
             world.despawn(e);
         }
         world.resource_mut::<Crust>().plate = plate_of_sample;
         for &(id, motion) in motions {
             world.spawn((
-                Plate { id: crate::components::PlateId(id) },
+                Plate {
+                    id: crate::components::PlateId(id),
+                },
                 motion,
                 PlateFrame::default(),
                 PlateMesh::default(),
-                PlateBounds { centroid: glam::DVec3::Z, cap_radius_rad: std::f64::consts::PI },
+                PlateBounds {
+                    centroid: glam::DVec3::Z,
+                    cap_radius_rad: std::f64::consts::PI,
+                },
                 PlateStats::default(),
             ));
         }
-        let next = ids.last().map_or(0, |m| m + 1).max(world.resource::<NextPlateId>().0);
+        let next = ids
+            .last()
+            .map_or(0, |m| m + 1)
+            .max(world.resource::<NextPlateId>().0);
         world.resource_mut::<NextPlateId>().0 = next;
         resample::rebuild_plate_entities(world, &[]);
         self.refresh_stats();
@@ -263,7 +308,7 @@ impl Simulation {
     pub fn plate_table(&mut self) -> PlateTable {
         let world = self.app.world_mut();
         let mut q = world.query::<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>();
-        PlateTable::from_iter(q.iter(world).map(|(p, m, f, b, s)| (*p, *m, *f, *b, *s)))
+        PlateTable::from_plates(q.iter(world).map(|(p, m, f, b, s)| (*p, *m, *f, *b, *s)))
     }
 
     /// The crust as it would be after a resampling now, without changing the simulation: every
@@ -271,7 +316,11 @@ impl Simulation {
     /// `oceanic_crust` phenomenon is on). This is what maps and exports show.
     pub fn resampled_crust(&mut self) -> Crust {
         let table = self.plate_table();
-        let ocean_on = self.app.world().resource::<Phenomena>().is_enabled("oceanic_crust");
+        let ocean_on = self
+            .app
+            .world()
+            .resource::<Phenomena>()
+            .is_enabled("oceanic_crust");
         let world = self.app.world();
         let mesh = world.resource::<SphereMesh>();
         let crust = world.resource::<Crust>();
@@ -284,13 +333,20 @@ impl Simulation {
         let mut next = Crust::default();
         resample::locate_sources(mesh, crust, &table, &mut sources);
         resample::interpolate(mesh, crust, &table, &sources, &mut next);
-        let gap_ids: Vec<u32> = sources.iter().enumerate().filter(|(_, s)| s.is_gap()).map(|(j, _)| j as u32).collect();
+        let gap_ids: Vec<u32> = sources
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.is_gap())
+            .map(|(j, _)| j as u32)
+            .collect();
         let gaps = resample::nearest_two_plates(mesh, &next.plate, &gap_ids);
         resample::fill_gaps_from_nearest(&mut next, &gaps);
         if ocean_on {
             let elapsed = clock.steps_since_resample as f64 * params.time.time_step_my;
-            let made: Vec<_> =
-                gaps.iter().map(|g| oceanic_crust::ridge_crust(mesh, params, &next.elevation_km, elapsed, g)).collect();
+            let made: Vec<_> = gaps
+                .iter()
+                .map(|g| oceanic_crust::ridge_crust(mesh, params, &next.elevation_km, elapsed, g))
+                .collect();
             for (g, m) in gaps.iter().zip(made) {
                 if let Some((z, age, ridge)) = m {
                     let j = g.sample as usize;
@@ -317,7 +373,12 @@ impl Simulation {
         h.write_u64(world.resource::<Crust>().hash());
         for p in &table.plates {
             h.write_u64(p.id as u64);
-            for v in [p.motion.euler_pole.x, p.motion.euler_pole.y, p.motion.euler_pole.z, p.motion.angular_speed_rad_per_my] {
+            for v in [
+                p.motion.euler_pole.x,
+                p.motion.euler_pole.y,
+                p.motion.euler_pole.z,
+                p.motion.angular_speed_rad_per_my,
+            ] {
                 h.write_u64(v.to_bits());
             }
             for c in p.world_from_plate.to_cols_array() {
@@ -342,6 +403,9 @@ impl Simulation {
         let work_bytes = work.next.heap_bytes()
             + work.sources.capacity() * std::mem::size_of::<resample::SampleSource>()
             + work.gaps.capacity() * std::mem::size_of::<resample::GapSample>();
-        world.resource::<SphereMesh>().heap_bytes() + world.resource::<Crust>().heap_bytes() + work_bytes + plates
+        world.resource::<SphereMesh>().heap_bytes()
+            + world.resource::<Crust>().heap_bytes()
+            + work_bytes
+            + plates
     }
 }

@@ -18,36 +18,83 @@ fn temp_dir(name: &str) -> PathBuf {
 fn fails_with(args: &[&str], needles: &[&str]) {
     let out = planet().args(args).output().expect("run planet");
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "planet {args:?} should fail cleanly; stderr: {stderr}");
-    assert!(!stderr.contains("panicked"), "planet {args:?} panicked: {stderr}");
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "planet {args:?} should fail cleanly; stderr: {stderr}"
+    );
+    assert!(
+        !stderr.contains("panicked"),
+        "planet {args:?} panicked: {stderr}"
+    );
     for n in needles {
-        assert!(stderr.contains(n), "planet {args:?}: message lacks {n:?}: {stderr}");
+        assert!(
+            stderr.contains(n),
+            "planet {args:?}: message lacks {n:?}: {stderr}"
+        );
     }
 }
 
 #[test]
 fn bad_parameters_give_clear_errors() {
-    fails_with(&["generate", "--plates", "0", "--samples", "2000"], &["init.plates", "0", "2..=2000"]);
+    fails_with(
+        &["generate", "--plates", "0", "--samples", "2000"],
+        &["init.plates", "0", "2..=2000"],
+    );
     fails_with(&["generate", "--samples", "10"], &["planet.samples", "10"]);
-    fails_with(&["generate", "--samples", "5000000"], &["planet.samples", "5000000"]);
-    fails_with(&["generate", "--continental-fraction", "1.5"], &["init.continental_fraction", "1.5"]);
-    fails_with(&["generate", "--samples", "1000", "--plates", "900"], &["init.plates", "planet.samples"]);
+    fails_with(
+        &["generate", "--samples", "5000000"],
+        &["planet.samples", "5000000"],
+    );
+    fails_with(
+        &["generate", "--continental-fraction", "1.5"],
+        &["init.continental_fraction", "1.5"],
+    );
+    fails_with(
+        &["generate", "--samples", "1000", "--plates", "900"],
+        &["init.plates", "planet.samples"],
+    );
     fails_with(&["generate", "--samples", "2000", "--my=-5"], &["--my"]);
-    fails_with(&["generate", "--samples", "2000", "--disable", "erosionn"], &["erosionn", "erosion"]);
-    fails_with(&["generate", "--config", "/no/such/file.toml"], &["/no/such/file.toml"]);
+    fails_with(
+        &["generate", "--samples", "2000", "--disable", "erosionn"],
+        &["erosionn", "erosion"],
+    );
+    fails_with(
+        &["generate", "--config", "/no/such/file.toml"],
+        &["/no/such/file.toml"],
+    );
     let dir = temp_dir("bad-config");
     std::fs::create_dir_all(&dir).unwrap();
     let cases = [
-        ("nan.toml", "[ocean]\nridge_elevation_km = nan\n", vec!["ocean.ridge_elevation_km", "nan"]),
-        ("inf.toml", "[planet]\nradius_km = inf\n", vec!["planet.radius_km", "inf"]),
-        ("typo.toml", "[ocean]\nridge_elevaton_km = -1.0\n", vec!["ridge_elevaton_km", "ocean.ridge_elevation_km"]),
+        (
+            "nan.toml",
+            "[ocean]\nridge_elevation_km = nan\n",
+            vec!["ocean.ridge_elevation_km", "nan"],
+        ),
+        (
+            "inf.toml",
+            "[planet]\nradius_km = inf\n",
+            vec!["planet.radius_km", "inf"],
+        ),
+        (
+            "typo.toml",
+            "[ocean]\nridge_elevaton_km = -1.0\n",
+            vec!["ridge_elevaton_km", "ocean.ridge_elevation_km"],
+        ),
         ("broken.toml", "[ocean\nx = 1\n", vec!["TOML"]),
-        ("neg.toml", "[init]\nplates = -3\n", vec!["init.plates", "-3"]),
+        (
+            "neg.toml",
+            "[init]\nplates = -3\n",
+            vec!["init.plates", "-3"],
+        ),
     ];
     for (name, text, needles) in cases {
         let f = dir.join(name);
         std::fs::write(&f, text).unwrap();
-        fails_with(&["generate", "--config", f.to_str().unwrap()], &needles.iter().map(|s| *s).collect::<Vec<_>>());
+        fails_with(
+            &["generate", "--config", f.to_str().unwrap()],
+            &needles.to_vec(),
+        );
     }
 }
 
@@ -56,12 +103,18 @@ fn params_prints_a_config_that_loads_back() {
     let out = planet().arg("params").output().unwrap();
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).unwrap();
-    assert!(text.contains("radius_km = 6370.0") && text.contains("# "), "{text}");
+    assert!(
+        text.contains("radius_km = 6370.0") && text.contains("# "),
+        "{text}"
+    );
     let dir = temp_dir("params");
     std::fs::create_dir_all(&dir).unwrap();
     let f = dir.join("defaults.toml");
     std::fs::write(&f, &text).unwrap();
-    let again = planet().args(["params", "--config", f.to_str().unwrap()]).output().unwrap();
+    let again = planet()
+        .args(["params", "--config", f.to_str().unwrap()])
+        .output()
+        .unwrap();
     assert!(again.status.success());
     assert_eq!(String::from_utf8(again.stdout).unwrap(), text);
 }
@@ -70,28 +123,60 @@ fn params_prints_a_config_that_loads_back() {
 fn generate_writes_maps_and_summary() {
     let dir = temp_dir("generate");
     let out = planet()
-        .args(["generate", "--samples", "20000", "--plates", "12", "--my", "40", "--width", "256", "--quiet", "--disable", "erosion"])
+        .args([
+            "generate",
+            "--samples",
+            "20000",
+            "--plates",
+            "12",
+            "--my",
+            "40",
+            "--width",
+            "256",
+            "--quiet",
+            "--disable",
+            "erosion",
+        ])
         .arg("--out")
         .arg(&dir)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    for f in ["elevation.png", "plates.png", "crust_age.png", "crust_type.png", "elevation16.png", "elevation16.json", "summary.json"] {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for f in [
+        "elevation.png",
+        "plates.png",
+        "crust_age.png",
+        "crust_type.png",
+        "elevation16.png",
+        "elevation16.json",
+        "summary.json",
+    ] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }
-    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["samples"], 20000);
     assert_eq!(summary["steps"], 20);
     assert_eq!(summary["time_my"], 40.0);
     let land = summary["land_fraction"].as_f64().unwrap();
     assert!(land > 0.05 && land < 0.6, "land fraction {land}");
     let e = &summary["elevation_m"];
-    let (min, p50, max) = (e["min"].as_f64().unwrap(), e["p50"].as_f64().unwrap(), e["max"].as_f64().unwrap());
+    let (min, p50, max) = (
+        e["min"].as_f64().unwrap(),
+        e["p50"].as_f64().unwrap(),
+        e["max"].as_f64().unwrap(),
+    );
     assert!(min < p50 && p50 < max);
     assert!(summary["timings_ms"]["resampling"].as_f64().unwrap() > 0.0);
     let img = image::open(dir.join("elevation16.png")).unwrap();
     assert_eq!((img.width(), img.height()), (256, 128));
-    let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("elevation16.json")).unwrap()).unwrap();
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("elevation16.json")).unwrap())
+            .unwrap();
     assert!((meta["min_elevation_m"].as_f64().unwrap() - min).abs() < 1.0 + 0.01 * min.abs());
 }
 
@@ -101,5 +186,14 @@ fn output_path_that_is_a_file_is_refused() {
     std::fs::create_dir_all(&dir).unwrap();
     let f = dir.join("occupied");
     std::fs::write(&f, "x").unwrap();
-    fails_with(&["generate", "--samples", "2000", "--out", f.to_str().unwrap()], &["occupied", "not a folder"]);
+    fails_with(
+        &[
+            "generate",
+            "--samples",
+            "2000",
+            "--out",
+            f.to_str().unwrap(),
+        ],
+        &["occupied", "not a folder"],
+    );
 }

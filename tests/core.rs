@@ -12,7 +12,10 @@ use tectonic_planets::io::summary::CrustSampler;
 use tectonic_planets::prelude::*;
 
 fn at_rest() -> PlateMotion {
-    PlateMotion { euler_pole: DVec3::Z, angular_speed_rad_per_my: 0.0 }
+    PlateMotion {
+        euler_pole: DVec3::Z,
+        angular_speed_rad_per_my: 0.0,
+    }
 }
 
 #[test]
@@ -31,11 +34,23 @@ fn resampling_at_rest_is_the_identity() {
         sim.request_resample();
         sim.step().unwrap();
     }
-    assert_eq!(sim.clock().resamplings, resamplings + 10, "ten resamplings ran");
+    assert_eq!(
+        sim.clock().resamplings,
+        resamplings + 10,
+        "ten resamplings ran"
+    );
     let after = sim.crust();
     assert_eq!(before.plate, after.plate, "plate ids changed at rest");
-    assert_eq!(before.crust_type, after.crust_type, "crust types changed at rest");
-    let worst = before.elevation_km.iter().zip(&after.elevation_km).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    assert_eq!(
+        before.crust_type, after.crust_type,
+        "crust types changed at rest"
+    );
+    let worst = before
+        .elevation_km
+        .iter()
+        .zip(&after.elevation_km)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
     assert!(worst <= 1e-6, "elevation moved by {worst} km at rest");
 }
 
@@ -51,27 +66,49 @@ fn plates_turning_together_keep_their_continents() {
     let omega = 60.0 / 6370.0; // 60 mm/yr at the pole's equator
     let ids: Vec<u32> = sim.plate_table().plates.iter().map(|p| p.id).collect();
     for id in ids {
-        sim.set_plate_motion(id, PlateMotion { euler_pole: pole, angular_speed_rad_per_my: omega }).unwrap();
+        sim.set_plate_motion(
+            id,
+            PlateMotion {
+                euler_pole: pole,
+                angular_speed_rad_per_my: omega,
+            },
+        )
+        .unwrap();
     }
     let initial = sim.crust().clone();
     let mesh = sim.mesh().clone();
     let area0 = continental_area(&mesh, &initial);
     sim.run_steps(50).unwrap();
-    assert_eq!(sim.clock().steps_since_resample, 0, "the run ends on a resampling");
+    assert_eq!(
+        sim.clock().steps_since_resample,
+        0,
+        "the run ends on a resampling"
+    );
     assert!(sim.clock().resamplings >= 5);
     let area1 = continental_area(&mesh, sim.crust());
     let change = (area1 - area0).abs() / area0;
-    assert!(change < 0.01, "continental area changed by {:.2}%", change * 100.0);
+    assert!(
+        change < 0.01,
+        "continental area changed by {:.2}%",
+        change * 100.0
+    );
     // Land mask against the rotated initial mask.
     let turned = DQuat::from_axis_angle(pole, omega * sim.time_my());
-    let sampler = CrustSampler { mesh: &mesh, crust: &initial };
+    let sampler = CrustSampler {
+        mesh: &mesh,
+        crust: &initial,
+    };
     let agree = area_where(&mesh, |i| {
         let back = turned.inverse() * mesh.positions[i];
         let was_land = sampler.sample(back.to_array()).elevation_m > 0.0;
         was_land == (sim.crust().elevation_km[i] > 0.0)
     });
     let frac = agree / mesh.total_area_km2();
-    assert!(frac >= 0.98, "land mask agrees on only {:.2}% of the area", frac * 100.0);
+    assert!(
+        frac >= 0.98,
+        "land mask agrees on only {:.2}% of the area",
+        frac * 100.0
+    );
 }
 
 /// Northern and southern hemispheres turning apart about an axis on the equator: the gap opens
@@ -84,13 +121,28 @@ fn diverging_hemispheres_make_a_ridge() {
     p.resample.max_interval_steps = 1000;
     let mut sim = Simulation::new(p).unwrap();
     let mesh = sim.mesh().clone();
-    let north: Vec<u32> = mesh.positions.iter().map(|q| if q.z >= 0.0 { 0 } else { 1 }).collect();
+    let north: Vec<u32> = mesh
+        .positions
+        .iter()
+        .map(|q| if q.z >= 0.0 { 0 } else { 1 })
+        .collect();
     let omega = 50.0 / 6370.0;
-    let m_north = PlateMotion { euler_pole: DVec3::Y, angular_speed_rad_per_my: omega };
-    let m_south = PlateMotion { euler_pole: -DVec3::Y, angular_speed_rad_per_my: omega };
-    sim.reassign_plates(north, &[(0, m_north), (1, m_south)]).unwrap();
+    let m_north = PlateMotion {
+        euler_pole: DVec3::Y,
+        angular_speed_rad_per_my: omega,
+    };
+    let m_south = PlateMotion {
+        euler_pole: -DVec3::Y,
+        angular_speed_rad_per_my: omega,
+    };
+    sim.reassign_plates(north, &[(0, m_north), (1, m_south)])
+        .unwrap();
     // Mark the old crust as very old, so that new crust is recognisable by its age.
-    sim.world_mut().resource_mut::<Crust>().age_my.iter_mut().for_each(|a| *a = 1000.0);
+    sim.world_mut()
+        .resource_mut::<Crust>()
+        .age_my
+        .iter_mut()
+        .for_each(|a| *a = 1000.0);
     sim.run_steps(20).unwrap();
     let t_my = sim.time_my();
     sim.request_resample();
@@ -114,7 +166,10 @@ fn diverging_hemispheres_make_a_ridge() {
         let deep_in_gap = dn > 2.0 * spacing && ds > 2.0 * spacing;
         let clearly_covered = dn < -2.0 * spacing || ds < -2.0 * spacing;
         if clearly_covered {
-            assert!(!new_crust, "new crust outside the gap at sample {i} ({q:?})");
+            assert!(
+                !new_crust,
+                "new crust outside the gap at sample {i} ({q:?})"
+            );
         }
         if deep_in_gap {
             assert!(new_crust, "old crust left inside the gap at sample {i}");
@@ -130,16 +185,34 @@ fn diverging_hemispheres_make_a_ridge() {
     let rho = spearman(&ages, &dists);
     assert!(rho >= 0.9, "age vs distance to ridge: Spearman {rho:.3}");
     let mean_young = young_elev.iter().sum::<f32>() / young_elev.len() as f32;
-    assert!((mean_young + 1.0).abs() < 0.3, "crust at the ridge sits at {mean_young} km");
+    assert!(
+        (mean_young + 1.0).abs() < 0.3,
+        "crust at the ridge sits at {mean_young} km"
+    );
     // Elevation falls away from the ridge.
     let elev: Vec<f64> = (0..mesh.len())
         .filter(|&i| crust.age_my[i] < 500.0)
         .map(|i| crust.elevation_km[i] as f64)
         .collect();
-    let age: Vec<f64> = (0..mesh.len()).filter(|&i| crust.age_my[i] < 500.0).map(|i| crust.age_my[i] as f64).collect();
-    assert!(spearman(&elev, &age) < -0.8, "elevation does not fall with age");
-    let rd = crust.ridge_dir.iter().zip(&crust.age_my).filter(|(_, a)| **a < 500.0).filter(|(r, _)| r.iter().any(|c| *c != 0.0)).count();
-    assert!(rd * 10 > ages.len() * 9, "ridge directions recorded on new crust");
+    let age: Vec<f64> = (0..mesh.len())
+        .filter(|&i| crust.age_my[i] < 500.0)
+        .map(|i| crust.age_my[i] as f64)
+        .collect();
+    assert!(
+        spearman(&elev, &age) < -0.8,
+        "elevation does not fall with age"
+    );
+    let rd = crust
+        .ridge_dir
+        .iter()
+        .zip(&crust.age_my)
+        .filter(|(_, a)| **a < 500.0)
+        .filter(|(r, _)| r.iter().any(|c| *c != 0.0))
+        .count();
+    assert!(
+        rd * 10 > ages.len() * 9,
+        "ridge directions recorded on new crust"
+    );
 }
 
 #[test]
@@ -177,7 +250,8 @@ fn continents_move_with_their_plates() {
     let mut checked = 0;
     for (plate, start, area) in tracked {
         let m = table0.get(plate).unwrap().motion;
-        let predicted = DQuat::from_axis_angle(m.euler_pole, m.angular_speed_rad_per_my * t) * start;
+        let predicted =
+            DQuat::from_axis_angle(m.euler_pole, m.angular_speed_rad_per_my * t) * start;
         let displacement = angle_between(start, predicted);
         if displacement < 0.05 {
             continue; // too slow to say anything
@@ -185,21 +259,36 @@ fn continents_move_with_their_plates() {
         // The continental piece of the same plate nearest to the prediction.
         let nearest = (0..mesh.len())
             .filter(|&i| view.crust_type[i] == CrustType::Continental && view.plate[i] == plate)
-            .min_by(|&a, &b| angle_between(mesh.positions[a], predicted).total_cmp(&angle_between(mesh.positions[b], predicted)));
+            .min_by(|&a, &b| {
+                angle_between(mesh.positions[a], predicted)
+                    .total_cmp(&angle_between(mesh.positions[b], predicted))
+            });
         let Some(seed) = nearest else { continue };
-        let piece = components(&mesh, |i| view.crust_type[i] == CrustType::Continental && view.plate[i] == plate, |_, _| true)
-            .into_iter()
-            .find(|c| c.contains(&seed))
-            .unwrap();
+        let piece = components(
+            &mesh,
+            |i| view.crust_type[i] == CrustType::Continental && view.plate[i] == plate,
+            |_, _| true,
+        )
+        .into_iter()
+        .find(|c| c.contains(&seed))
+        .unwrap();
         let (now, now_area) = centroid(&piece);
         if (now_area - area).abs() > 0.05 * area {
             continue; // eaten or grown by the overlap rule: its centre moved for another reason
         }
         let err = angle_between(now, predicted);
-        assert!(err <= 0.1 * displacement, "continent of plate {plate}: off by {:.0} km of {:.0} km", err * 6370.0, displacement * 6370.0);
+        assert!(
+            err <= 0.1 * displacement,
+            "continent of plate {plate}: off by {:.0} km of {:.0} km",
+            err * 6370.0,
+            displacement * 6370.0
+        );
         checked += 1;
     }
-    assert!(checked >= 1, "no continent kept its shape long enough to check");
+    assert!(
+        checked >= 1,
+        "no continent kept its shape long enough to check"
+    );
 }
 
 #[test]
@@ -220,7 +309,11 @@ fn default_planet_after_250_my_is_healthy() {
             .iter()
             .map(|c| c.iter().map(|&i| mesh.area_km2[i]).sum::<f64>())
             .fold(0.0, f64::max);
-        assert!(largest >= 0.99 * total, "plate {id} at 250 My: largest piece holds {:.1}%", 100.0 * largest / total);
+        assert!(
+            largest >= 0.99 * total,
+            "plate {id} at 250 My: largest piece holds {:.1}%",
+            100.0 * largest / total
+        );
     }
     // And after the resampling that follows, the state itself: no empty plate, no stray piece.
     sim.request_resample();
@@ -236,13 +329,26 @@ fn default_planet_after_250_my_is_healthy() {
             .iter()
             .map(|c| c.iter().map(|&i| mesh.area_km2[i]).sum::<f64>())
             .fold(0.0, f64::max);
-        assert!(largest >= 0.99 * total, "plate {}: largest piece holds {:.1}%", p.id, 100.0 * largest / total);
+        assert!(
+            largest >= 0.99 * total,
+            "plate {}: largest piece holds {:.1}%",
+            p.id,
+            100.0 * largest / total
+        );
     }
     for &id in &view.plate {
-        assert!(table.get(id).is_some(), "sample owned by plate {id}, which has no entity");
+        assert!(
+            table.get(id).is_some(),
+            "sample owned by plate {id}, which has no entity"
+        );
     }
     for p in &table.plates {
-        let e = sim.world_mut().query::<(&Plate, &PlateMesh)>().iter(sim.world()).find(|(q, _)| q.id.0 == p.id).map(|(_, m)| m.samples.len());
+        let e = sim
+            .world_mut()
+            .query::<(&Plate, &PlateMesh)>()
+            .iter(sim.world())
+            .find(|(q, _)| q.id.0 == p.id)
+            .map(|(_, m)| m.samples.len());
         assert!(e.unwrap_or(0) > 0, "plate entity {} without samples", p.id);
     }
 }
@@ -250,7 +356,10 @@ fn default_planet_after_250_my_is_healthy() {
 #[test]
 fn same_seed_same_bits_with_one_thread_or_two() {
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         pool.install(|| {
             let mut p = params(40_000, 21);
             p.resample.min_interval_steps = 7;
@@ -265,7 +374,10 @@ fn same_seed_same_bits_with_one_thread_or_two() {
     assert_eq!(one, two);
     // And a different seed gives a different planet.
     let mut sim = Simulation::new(params(40_000, 22)).unwrap();
-    assert_ne!(sim.state_hash(), Simulation::new(params(40_000, 21)).unwrap().state_hash());
+    assert_ne!(
+        sim.state_hash(),
+        Simulation::new(params(40_000, 21)).unwrap().state_hash()
+    );
 }
 
 #[test]
@@ -274,8 +386,14 @@ fn initial_plates_do_not_depend_on_resolution() {
     let mut b = Simulation::new(params(200_000, 4)).unwrap();
     let ma = a.plate_table();
     let mb = b.plate_table();
-    let sa = CrustSampler { mesh: a.mesh(), crust: a.crust() };
-    let sb = CrustSampler { mesh: b.mesh(), crust: b.crust() };
+    let sa = CrustSampler {
+        mesh: a.mesh(),
+        crust: a.crust(),
+    };
+    let sb = CrustSampler {
+        mesh: b.mesh(),
+        crust: b.crust(),
+    };
     let (w, h) = (720, 360);
     let (mut same, mut total) = (0.0, 0.0);
     let (mut same_land, mut total_land) = (0.0, 0.0);
@@ -296,8 +414,16 @@ fn initial_plates_do_not_depend_on_resolution() {
             }
         }
     }
-    assert!(same / total >= 0.97, "plate maps agree on {:.2}%", 100.0 * same / total);
-    assert!(same_land / total_land >= 0.95, "continent maps agree on {:.2}%", 100.0 * same_land / total_land);
+    assert!(
+        same / total >= 0.97,
+        "plate maps agree on {:.2}%",
+        100.0 * same / total
+    );
+    assert!(
+        same_land / total_land >= 0.95,
+        "continent maps agree on {:.2}%",
+        100.0 * same_land / total_land
+    );
     assert_eq!(ma.plates.len(), mb.plates.len());
     for (x, y) in ma.plates.iter().zip(&mb.plates) {
         assert_eq!(x.motion, y.motion, "plate {} moves differently", x.id);
@@ -328,14 +454,22 @@ fn a_user_can_replace_a_builtin_plugin() {
             app.register_phenomenon("my_erosion", TectonicSystems::Erosion, "counts its calls");
             app.add_systems(
                 TectonicStep,
-                (|mut c: ResMut<Calls>| c.0 += 1).in_set(TectonicSystems::Erosion).run_if(phenomenon_enabled("my_erosion")),
+                (|mut c: ResMut<Calls>| c.0 += 1)
+                    .in_set(TectonicSystems::Erosion)
+                    .run_if(phenomenon_enabled("my_erosion")),
             );
         }
     }
-    let plugins = TectonicPlugins.build().disable::<ErosionPlugin>().add(MyErosion);
+    let plugins = TectonicPlugins
+        .build()
+        .disable::<ErosionPlugin>()
+        .add(MyErosion);
     let mut sim = Simulation::with_plugins(params(10_000, 1), plugins).unwrap();
     let names: Vec<&str> = sim.phenomena().iter().map(|p| p.name).collect();
-    assert!(names.contains(&"my_erosion") && !names.contains(&"erosion"), "{names:?}");
+    assert!(
+        names.contains(&"my_erosion") && !names.contains(&"erosion"),
+        "{names:?}"
+    );
     sim.run_steps(4).unwrap();
     assert_eq!(sim.world().resource::<Calls>().0, 4);
     sim.set_enabled("my_erosion", false).unwrap();

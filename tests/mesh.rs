@@ -11,9 +11,18 @@ fn check(n: usize, jitter: f64) {
     let inward = m
         .triangles
         .iter()
-        .filter(|t| triple(m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]) <= 0.0)
+        .filter(|t| {
+            triple(
+                m.positions[t[0] as usize],
+                m.positions[t[1] as usize],
+                m.positions[t[2] as usize],
+            ) <= 0.0
+        })
         .count();
-    assert_eq!(inward, 0, "n = {n}: {inward} triangles not oriented outward");
+    assert_eq!(
+        inward, 0,
+        "n = {n}: {inward} triangles not oriented outward"
+    );
     let sphere = 4.0 * std::f64::consts::PI * 6370.0f64.powi(2);
     assert!((m.total_area_km2() - sphere).abs() / sphere < 1e-9);
     // Every sample has at least three neighbours and a positive area.

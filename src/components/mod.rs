@@ -48,7 +48,9 @@ pub struct PlateFrame {
 
 impl Default for PlateFrame {
     fn default() -> Self {
-        Self { world_from_plate: DQuat::IDENTITY }
+        Self {
+            world_from_plate: DQuat::IDENTITY,
+        }
     }
 }
 

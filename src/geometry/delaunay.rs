@@ -31,7 +31,10 @@ pub fn spherical_delaunay(points: &[DVec3]) -> Option<Vec<[u32; 3]>> {
         if denom <= 0.0 {
             return None; // duplicate of the pole
         }
-        planar.push(delaunator::Point { x: q.dot(e1) / denom, y: q.dot(e2) / denom });
+        planar.push(delaunator::Point {
+            x: q.dot(e1) / denom,
+            y: q.dot(e2) / denom,
+        });
         back.push(i as u32);
     }
     let tri = delaunator::triangulate(&planar);
@@ -39,7 +42,11 @@ pub fn spherical_delaunay(points: &[DVec3]) -> Option<Vec<[u32; 3]>> {
         return None;
     }
     let orient = |mut t: [u32; 3]| {
-        let (a, b, c) = (points[t[0] as usize], points[t[1] as usize], points[t[2] as usize]);
+        let (a, b, c) = (
+            points[t[0] as usize],
+            points[t[1] as usize],
+            points[t[2] as usize],
+        );
         if triple(a, b, c) < 0.0 {
             t.swap(1, 2);
         }

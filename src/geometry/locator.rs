@@ -100,51 +100,59 @@ impl MeshLocator {
             .par_chunks(CHUNK)
             .enumerate()
             .map(|(ci, chunk)| {
-            let mut cells: Vec<u64> = Vec::with_capacity(chunk.len() * 6);
-            for (k, tri) in chunk.iter().enumerate() {
-                let t = ci * CHUNK + k;
-                let v = [positions[tri[0] as usize], positions[tri[1] as usize], positions[tri[2] as usize]];
-                for face in 0u8..6 {
-                    let axis = match face {
-                        0 => DVec3::X,
-                        1 => -DVec3::X,
-                        2 => DVec3::Y,
-                        3 => -DVec3::Y,
-                        4 => DVec3::Z,
-                        _ => -DVec3::Z,
-                    };
-                    // A triangle (edges below ~10°) can only reach a face whose axis is within
-                    // about 65° of one of its vertices.
-                    if v.iter().all(|p| p.dot(axis) < 0.4) {
-                        continue;
-                    }
-                    let p = [face_project(face, v[0]), face_project(face, v[1]), face_project(face, v[2])];
-                    if p.iter().any(|&(d, _, _)| d < 0.2) {
-                        continue;
-                    }
-                    let umin = p[0].1.min(p[1].1).min(p[2].1);
-                    let umax = p[0].1.max(p[1].1).max(p[2].1);
-                    let vmin = p[0].2.min(p[1].2).min(p[2].2);
-                    let vmax = p[0].2.max(p[1].2).max(p[2].2);
-                    if umin > 1.0 || umax < -1.0 || vmin > 1.0 || vmax < -1.0 {
-                        continue;
-                    }
-                    let to_cell = |x: f64| -> usize {
-                        let s = (warp(x.clamp(-1.0, 1.0)) + 1.0) * 0.5 * grid as f64;
-                        (s.floor().max(0.0) as usize).min(grid - 1)
-                    };
-                    let pad = 1e-9;
-                    let (i0, i1) = (to_cell(umin - pad), to_cell(umax + pad));
-                    let (j0, j1) = (to_cell(vmin - pad), to_cell(vmax + pad));
-                    let base = face as usize * grid * grid;
-                    for j in j0..=j1 {
-                        for i in i0..=i1 {
-                            cells.push(((base + j * grid + i) as u64) << 32 | t as u64);
+                let mut cells: Vec<u64> = Vec::with_capacity(chunk.len() * 6);
+                for (k, tri) in chunk.iter().enumerate() {
+                    let t = ci * CHUNK + k;
+                    let v = [
+                        positions[tri[0] as usize],
+                        positions[tri[1] as usize],
+                        positions[tri[2] as usize],
+                    ];
+                    for face in 0u8..6 {
+                        let axis = match face {
+                            0 => DVec3::X,
+                            1 => -DVec3::X,
+                            2 => DVec3::Y,
+                            3 => -DVec3::Y,
+                            4 => DVec3::Z,
+                            _ => -DVec3::Z,
+                        };
+                        // A triangle (edges below ~10°) can only reach a face whose axis is within
+                        // about 65° of one of its vertices.
+                        if v.iter().all(|p| p.dot(axis) < 0.4) {
+                            continue;
+                        }
+                        let p = [
+                            face_project(face, v[0]),
+                            face_project(face, v[1]),
+                            face_project(face, v[2]),
+                        ];
+                        if p.iter().any(|&(d, _, _)| d < 0.2) {
+                            continue;
+                        }
+                        let umin = p[0].1.min(p[1].1).min(p[2].1);
+                        let umax = p[0].1.max(p[1].1).max(p[2].1);
+                        let vmin = p[0].2.min(p[1].2).min(p[2].2);
+                        let vmax = p[0].2.max(p[1].2).max(p[2].2);
+                        if umin > 1.0 || umax < -1.0 || vmin > 1.0 || vmax < -1.0 {
+                            continue;
+                        }
+                        let to_cell = |x: f64| -> usize {
+                            let s = (warp(x.clamp(-1.0, 1.0)) + 1.0) * 0.5 * grid as f64;
+                            (s.floor().max(0.0) as usize).min(grid - 1)
+                        };
+                        let pad = 1e-9;
+                        let (i0, i1) = (to_cell(umin - pad), to_cell(umax + pad));
+                        let (j0, j1) = (to_cell(vmin - pad), to_cell(vmax + pad));
+                        let base = face as usize * grid * grid;
+                        for j in j0..=j1 {
+                            for i in i0..=i1 {
+                                cells.push(((base + j * grid + i) as u64) << 32 | t as u64);
+                            }
                         }
                     }
                 }
-            }
-            cells
+                cells
             })
             .collect();
         // Counting sort by cell; within a cell, triangles stay in ascending order.
@@ -162,7 +170,11 @@ impl MeshLocator {
             cell_triangles[fill[c] as usize] = pr as u32;
             fill[c] += 1;
         }
-        Self { grid, cell_start, cell_triangles }
+        Self {
+            grid,
+            cell_start,
+            cell_triangles,
+        }
     }
 
     /// Number of grid cells.
@@ -200,17 +212,30 @@ impl MeshLocator {
 
     /// [`Self::locate`] when the cell of `q` is already known.
     #[inline]
-    pub fn locate_in_cell(&self, positions: &[DVec3], triangles: &[[u32; 3]], q: DVec3, c: usize) -> Location {
+    pub fn locate_in_cell(
+        &self,
+        positions: &[DVec3],
+        triangles: &[[u32; 3]],
+        q: DVec3,
+        c: usize,
+    ) -> Location {
         let range = self.cell_start[c] as usize..self.cell_start[c + 1] as usize;
-        if let Some(loc) = best_in(positions, triangles, q, self.cell_triangles[range].iter().copied()) {
-            if loc.1 >= INSIDE_TOLERANCE {
-                return loc.0;
-            }
+        if let Some(loc) = best_in(
+            positions,
+            triangles,
+            q,
+            self.cell_triangles[range].iter().copied(),
+        ) && loc.1 >= INSIDE_TOLERANCE
+        {
+            return loc.0;
         }
         // Only reachable through extreme rounding; a full scan is slow but always right.
         best_in(positions, triangles, q, 0..triangles.len() as u32)
             .map(|(l, _)| l)
-            .unwrap_or(Location { triangle: 0, weights: [1.0, 0.0, 0.0] })
+            .unwrap_or(Location {
+                triangle: 0,
+                weights: [1.0, 0.0, 0.0],
+            })
     }
 }
 
@@ -225,7 +250,11 @@ fn best_in(
     let mut best: Option<(Location, f64)> = None;
     for t in candidates {
         let tri = triangles[t as usize];
-        let (a, b, c) = (positions[tri[0] as usize], positions[tri[1] as usize], positions[tri[2] as usize]);
+        let (a, b, c) = (
+            positions[tri[0] as usize],
+            positions[tri[1] as usize],
+            positions[tri[2] as usize],
+        );
         // Cheap rejection first: the point is well outside the edge b–c.
         let wa = q.dot(b.cross(c));
         if wa < 0.0 && best.as_ref().is_some_and(|(_, m)| *m >= 0.0) {
@@ -244,7 +273,13 @@ fn best_in(
             Some((l, bm)) => m > *bm || (m == *bm && t < l.triangle),
         };
         if better {
-            best = Some((Location { triangle: t, weights: w }, m));
+            best = Some((
+                Location {
+                    triangle: t,
+                    weights: w,
+                },
+                m,
+            ));
             // Strictly inside one triangle means outside every other: nothing can beat it.
             if m > 1e-9 {
                 break;

@@ -110,7 +110,10 @@ impl SphereMesh {
                 slices.push(head);
                 rest = tail;
             }
-            slices.par_iter_mut().with_min_len(4096).for_each(|s| s.sort_unstable());
+            slices
+                .par_iter_mut()
+                .with_min_len(4096)
+                .for_each(|s| s.sort_unstable());
         }
         tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "adjacency");
         let t = std::time::Instant::now();
@@ -119,8 +122,14 @@ impl SphereMesh {
             .par_iter()
             .with_min_len(4096)
             .map(|t| {
-                let (a, b, c) = (positions[t[0] as usize], positions[t[1] as usize], positions[t[2] as usize]);
-                let edge = angle_between(a, b).max(angle_between(b, c)).max(angle_between(c, a));
+                let (a, b, c) = (
+                    positions[t[0] as usize],
+                    positions[t[1] as usize],
+                    positions[t[2] as usize],
+                );
+                let edge = angle_between(a, b)
+                    .max(angle_between(b, c))
+                    .max(angle_between(c, a));
                 (spherical_triangle_area(a, b, c) * r2 / 3.0, edge)
             })
             .collect();
@@ -138,7 +147,16 @@ impl SphereMesh {
         let locator = MeshLocator::build(&positions, &triangles);
         tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "locator");
         let t = std::time::Instant::now();
-        let mesh = Self { positions, triangles, neighbor_start, neighbors, area_km2, radius_km, max_edge_rad, locator };
+        let mesh = Self {
+            positions,
+            triangles,
+            neighbor_start,
+            neighbors,
+            area_km2,
+            radius_km,
+            max_edge_rad,
+            locator,
+        };
         mesh.check_topology()?;
         tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "topology check");
         Ok(mesh)
@@ -205,15 +223,24 @@ impl SphereMesh {
     /// Verifies orientation, Euler characteristic and that every edge borders two triangles.
     fn check_topology(&self) -> Result<(), MeshError> {
         let bad = self.triangles.par_iter().filter(|t| {
-            let (a, b, c) = (self.positions[t[0] as usize], self.positions[t[1] as usize], self.positions[t[2] as usize]);
-            !(triple(a, b, c) > 0.0)
+            let (a, b, c) = (
+                self.positions[t[0] as usize],
+                self.positions[t[1] as usize],
+                self.positions[t[2] as usize],
+            );
+            triple(a, b, c).partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
         });
         let n_bad = bad.count();
         if n_bad > 0 {
-            return Err(MeshError::Triangulation(format!("{n_bad} triangles are not oriented outward")));
+            return Err(MeshError::Triangulation(format!(
+                "{n_bad} triangles are not oriented outward"
+            )));
         }
         if self.euler_characteristic() != 2 {
-            return Err(MeshError::Triangulation(format!("Euler characteristic {}", self.euler_characteristic())));
+            return Err(MeshError::Triangulation(format!(
+                "Euler characteristic {}",
+                self.euler_characteristic()
+            )));
         }
         Ok(())
     }
@@ -225,7 +252,13 @@ mod tests {
 
     #[test]
     fn orientation_and_euler_characteristic_at_several_sizes() {
-        for &(n, jitter) in &[(1000, 0.0), (1000, 0.5), (12_345, 0.3), (100_000, 0.0), (100_000, 0.9)] {
+        for &(n, jitter) in &[
+            (1000, 0.0),
+            (1000, 0.5),
+            (12_345, 0.3),
+            (100_000, 0.0),
+            (100_000, 0.9),
+        ] {
             let m = SphereMesh::fibonacci(n, jitter, 7, 6370.0).expect("mesh");
             assert_eq!(m.euler_characteristic(), 2, "n={n}");
             assert_eq!(m.triangles.len(), 2 * n - 4);
@@ -239,14 +272,25 @@ mod tests {
             directed.sort_unstable();
             let before = directed.len();
             directed.dedup();
-            assert_eq!(before, directed.len(), "a directed edge repeats: orientation flipped somewhere");
+            assert_eq!(
+                before,
+                directed.len(),
+                "a directed edge repeats: orientation flipped somewhere"
+            );
             for t in &m.triangles {
-                let (a, b, c) = (m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]);
-                assert!(triple(a, b, c) > 0.0);
+                let (a, b, c) = (
+                    m.positions[t[0] as usize],
+                    m.positions[t[1] as usize],
+                    m.positions[t[2] as usize],
+                );
+                asserttriple(a, b, c).partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater);
             }
             let area = m.total_area_km2();
             let sphere = 4.0 * std::f64::consts::PI * 6370.0f64.powi(2);
-            assert!((area - sphere).abs() / sphere < 1e-9, "area {area} vs {sphere}");
+            assert!(
+                (area - sphere).abs() / sphere < 1e-9,
+                "area {area} vs {sphere}"
+            );
         }
     }
 
@@ -256,7 +300,11 @@ mod tests {
         // neighbours across its edges (local Delaunay implies global).
         let m = SphereMesh::fibonacci(5000, 0.6, 3, 1.0).expect("mesh");
         for t in &m.triangles {
-            let (a, b, c) = (m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]);
+            let (a, b, c) = (
+                m.positions[t[0] as usize],
+                m.positions[t[1] as usize],
+                m.positions[t[2] as usize],
+            );
             let n = (b - a).cross(c - a).normalize();
             let d = n.dot(a);
             for &v in t {
@@ -264,7 +312,10 @@ mod tests {
                     if t.contains(&w) {
                         continue;
                     }
-                    assert!(n.dot(m.positions[w as usize]) <= d + 1e-12, "sample {w} inside circumcircle");
+                    assert!(
+                        n.dot(m.positions[w as usize]) <= d + 1e-12,
+                        "sample {w} inside circumcircle"
+                    );
                 }
             }
         }
@@ -272,8 +323,14 @@ mod tests {
 
     #[test]
     fn bad_sample_counts_are_rejected() {
-        assert!(matches!(SphereMesh::fibonacci(999, 0.0, 1, 1.0), Err(MeshError::SampleCount(999))));
-        assert!(matches!(SphereMesh::fibonacci(4_000_001, 0.0, 1, 1.0), Err(MeshError::SampleCount(_))));
+        assert!(matches!(
+            SphereMesh::fibonacci(999, 0.0, 1, 1.0),
+            Err(MeshError::SampleCount(999))
+        ));
+        assert!(matches!(
+            SphereMesh::fibonacci(4_000_001, 0.0, 1, 1.0),
+            Err(MeshError::SampleCount(_))
+        ));
     }
 
     #[test]
@@ -281,20 +338,32 @@ mod tests {
         let m = SphereMesh::fibonacci(3000, 0.4, 11, 1.0).expect("mesh");
         let mut probes: Vec<DVec3> = m.positions.clone();
         for t in m.triangles.iter().take(500) {
-            let (a, b, c) = (m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]);
+            let (a, b, c) = (
+                m.positions[t[0] as usize],
+                m.positions[t[1] as usize],
+                m.positions[t[2] as usize],
+            );
             probes.push((a + b).normalize()); // on an edge
             probes.push((a + b + c).normalize()); // inside
         }
         for i in 0..20_000u64 {
-            probes.push(crate::random::unit_vector(crate::random::hash3(1, 2, i), crate::random::hash3(1, 3, i)));
+            probes.push(crate::random::unit_vector(
+                crate::random::hash3(1, 2, i),
+                crate::random::hash3(1, 3, i),
+            ));
         }
         for q in probes {
             let loc = m.locate(q);
             let t = m.triangles[loc.triangle as usize];
-            let (a, b, c) = (m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize]);
+            let (a, b, c) = (
+                m.positions[t[0] as usize],
+                m.positions[t[1] as usize],
+                m.positions[t[2] as usize],
+            );
             assert!(loc.weights.iter().all(|&w| w >= -1e-9), "{loc:?}");
             assert!((loc.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
-            let rebuilt = (a * loc.weights[0] + b * loc.weights[1] + c * loc.weights[2]).normalize();
+            let rebuilt =
+                (a * loc.weights[0] + b * loc.weights[1] + c * loc.weights[2]).normalize();
             assert!((rebuilt - q).length() < 1e-9);
             // Deterministic: the same point always gives the same triangle.
             assert_eq!(m.locate(q), loc);

@@ -30,7 +30,8 @@ pub fn fibonacci_points(n: usize, jitter: f64, seed: u64) -> Vec<DVec3> {
             let p = DVec3::new(r * phi.cos(), r * phi.sin(), z);
             if max_offset > 0.0 {
                 let (e1, e2) = tangent_basis(p);
-                let theta = std::f64::consts::TAU * unit_f64(hash3(seed, stream::JITTER, 2 * i as u64));
+                let theta =
+                    std::f64::consts::TAU * unit_f64(hash3(seed, stream::JITTER, 2 * i as u64));
                 // sqrt gives a uniform distribution over the disc of radius max_offset.
                 let d = max_offset * unit_f64(hash3(seed, stream::JITTER, 2 * i as u64 + 1)).sqrt();
                 (p * d.cos() + (e1 * theta.cos() + e2 * theta.sin()) * d.sin()).normalize()
@@ -39,7 +40,11 @@ pub fn fibonacci_points(n: usize, jitter: f64, seed: u64) -> Vec<DVec3> {
             }
         })
         .collect();
-    let mut keyed: Vec<(u64, usize)> = pts.par_iter().enumerate().map(|(i, &p)| (morton_key(p), i)).collect();
+    let mut keyed: Vec<(u64, usize)> = pts
+        .par_iter()
+        .enumerate()
+        .map(|(i, &p)| (morton_key(p), i))
+        .collect();
     keyed.par_sort_unstable();
     let sorted: Vec<DVec3> = keyed.iter().map(|&(_, i)| pts[i]).collect();
     pts.clear();
@@ -93,7 +98,11 @@ mod tests {
     fn sort_gives_locality() {
         let pts = fibonacci_points(20_000, 0.3, 1);
         let spacing = mean_spacing_rad(pts.len());
-        let mean_step: f64 = pts.windows(2).map(|w| (w[0] - w[1]).length()).sum::<f64>() / (pts.len() - 1) as f64;
-        assert!(mean_step < 4.0 * spacing, "mean step {mean_step} vs spacing {spacing}");
+        let mean_step: f64 =
+            pts.windows(2).map(|w| (w[0] - w[1]).length()).sum::<f64>() / (pts.len() - 1) as f64;
+        assert!(
+            mean_step < 4.0 * spacing,
+            "mean step {mean_step} vs spacing {spacing}"
+        );
     }
 }

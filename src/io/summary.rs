@@ -51,7 +51,12 @@ pub struct Summary {
 
 /// Area-weighted elevation percentiles of a crust, metres.
 pub fn elevation_summary(mesh: &SphereMesh, crust: &Crust) -> ElevationSummary {
-    let mut pairs: Vec<(f32, f64)> = crust.elevation_km.iter().copied().zip(mesh.area_km2.iter().copied()).collect();
+    let mut pairs: Vec<(f32, f64)> = crust
+        .elevation_km
+        .iter()
+        .copied()
+        .zip(mesh.area_km2.iter().copied())
+        .collect();
     pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
     let total: f64 = pairs.iter().map(|p| p.1).sum();
     let quantile = |q: f64| -> f64 {
@@ -82,7 +87,10 @@ pub fn summarize(sim: &Simulation, view: &Crust) -> Summary {
     plates.sort_unstable();
     plates.dedup();
     let timings = sim.timings();
-    let timings_ms = timings.names().filter_map(|n| timings.median_ms(n).map(|m| (n.to_string(), m))).collect();
+    let timings_ms = timings
+        .names()
+        .filter_map(|n| timings.median_ms(n).map(|m| (n.to_string(), m)))
+        .collect();
     Summary {
         seed: sim.params().planet.seed,
         samples: mesh.len(),
@@ -113,7 +121,9 @@ impl SphereField for CrustSampler<'_> {
         let t = self.mesh.triangles[loc.triangle as usize];
         let w = loc.weights;
         let lerp = |f: &[f32]| {
-            (w[0] * f[t[0] as usize] as f64 + w[1] * f[t[1] as usize] as f64 + w[2] * f[t[2] as usize] as f64) as f32
+            (w[0] * f[t[0] as usize] as f64
+                + w[1] * f[t[1] as usize] as f64
+                + w[2] * f[t[2] as usize] as f64) as f32
         };
         let d = t[loc.dominant_corner()] as usize;
         MapSample {

@@ -105,13 +105,25 @@ enum TimingMark {
 /// Registers a phenomenon from a plugin's `build`.
 pub trait PhenomenonAppExt {
     /// Adds `name` to the [`Phenomena`] registry (enabled), in `set`.
-    fn register_phenomenon(&mut self, name: &'static str, set: TectonicSystems, description: &'static str) -> &mut Self;
+    fn register_phenomenon(
+        &mut self,
+        name: &'static str,
+        set: TectonicSystems,
+        description: &'static str,
+    ) -> &mut Self;
 }
 
 impl PhenomenonAppExt for App {
-    fn register_phenomenon(&mut self, name: &'static str, set: TectonicSystems, description: &'static str) -> &mut Self {
+    fn register_phenomenon(
+        &mut self,
+        name: &'static str,
+        set: TectonicSystems,
+        description: &'static str,
+    ) -> &mut Self {
         self.init_resource::<Phenomena>();
-        self.world_mut().resource_mut::<Phenomena>().register(name, set, description);
+        self.world_mut()
+            .resource_mut::<Phenomena>()
+            .register(name, set, description);
         self
     }
 }
@@ -133,20 +145,31 @@ impl Plugin for TectonicSchedulePlugin {
             .init_resource::<diagnostics::CrustHealth>()
             .init_resource::<crate::resources::CrustStats>();
         for set in TectonicSystems::ALL {
-            app.configure_sets(TectonicStep, (TimingMark::Begin(set), set, TimingMark::End(set)).chain());
+            app.configure_sets(
+                TectonicStep,
+                (TimingMark::Begin(set), set, TimingMark::End(set)).chain(),
+            );
             app.add_systems(TectonicStep, begin_timing.in_set(TimingMark::Begin(set)));
             let name = set.name();
             app.add_systems(
                 TectonicStep,
-                (move |mut t: ResMut<StepTimings>| end_timing(&mut t, name)).in_set(TimingMark::End(set)),
+                (move |mut t: ResMut<StepTimings>| end_timing(&mut t, name))
+                    .in_set(TimingMark::End(set)),
             );
         }
         for pair in TectonicSystems::ALL.windows(2) {
-            app.configure_sets(TectonicStep, TimingMark::End(pair[0]).before(TimingMark::Begin(pair[1])));
+            app.configure_sets(
+                TectonicStep,
+                TimingMark::End(pair[0]).before(TimingMark::Begin(pair[1])),
+            );
         }
         app.configure_sets(
             TectonicStep,
-            (ResampleSystems::Interpolate, ResampleSystems::FillGaps, ResampleSystems::Rebuild)
+            (
+                ResampleSystems::Interpolate,
+                ResampleSystems::FillGaps,
+                ResampleSystems::Rebuild,
+            )
                 .chain()
                 .in_set(TectonicSystems::Resample),
         );
@@ -218,7 +241,11 @@ pub struct ResamplePlugin;
 
 impl Plugin for ResamplePlugin {
     fn build(&self, app: &mut App) {
-        app.register_phenomenon("resample", TectonicSystems::Resample, "global resampling onto the reference mesh");
+        app.register_phenomenon(
+            "resample",
+            TectonicSystems::Resample,
+            "global resampling onto the reference mesh",
+        );
         app.add_systems(
             TectonicStep,
             (

@@ -8,7 +8,9 @@ use crate::random::StableHasher;
 
 /// Oceanic or continental crust.
 #[repr(u8)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, bytemuck::NoUninit)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, bytemuck::NoUninit,
+)]
 pub enum CrustType {
     /// Dense, young, thin crust formed at ridges.
     #[default]
@@ -19,7 +21,9 @@ pub enum CrustType {
 
 /// What raised a piece of continental crust (paper Table 1).
 #[repr(u8)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, bytemuck::NoUninit)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, bytemuck::NoUninit,
+)]
 pub enum Orogeny {
     /// No orogeny recorded.
     #[default]
@@ -127,7 +131,8 @@ impl Crust {
                 return Err(NonFinite { field, index });
             }
         }
-        let vector: [(&'static str, &Vec<[f32; 3]>); 2] = [("ridge_dir", &self.ridge_dir), ("fold_dir", &self.fold_dir)];
+        let vector: [(&'static str, &Vec<[f32; 3]>); 2] =
+            [("ridge_dir", &self.ridge_dir), ("fold_dir", &self.fold_dir)];
         for (field, v) in vector {
             if let Some(index) = v.iter().position(|x| !x.iter().all(|c| c.is_finite())) {
                 return Err(NonFinite { field, index });

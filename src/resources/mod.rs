@@ -7,7 +7,7 @@ pub mod plate_table;
 pub mod timings;
 
 pub use crust::{Crust, CrustType, NO_PLATE, NonFinite, Orogeny};
-pub use phenomena::{PhenomenonInfo, Phenomena, phenomenon_enabled};
+pub use phenomena::{Phenomena, PhenomenonInfo, phenomenon_enabled};
 pub use plate_table::{PlateState, PlateTable};
 pub use timings::StepTimings;
 

@@ -27,9 +27,19 @@ pub struct Phenomena {
 
 impl Phenomena {
     /// Adds a phenomenon (enabled). Registering a name twice keeps the first entry.
-    pub fn register(&mut self, name: &'static str, set: TectonicSystems, description: &'static str) {
+    pub fn register(
+        &mut self,
+        name: &'static str,
+        set: TectonicSystems,
+        description: &'static str,
+    ) {
         if !self.entries.iter().any(|e| e.name == name) {
-            self.entries.push(PhenomenonInfo { name, set, description, enabled: true });
+            self.entries.push(PhenomenonInfo {
+                name,
+                set,
+                description,
+                enabled: true,
+            });
         }
     }
     /// Whether `name` is registered and enabled.
@@ -45,7 +55,11 @@ impl Phenomena {
             }
             None => Err(format!(
                 "unknown phenomenon \"{name}\"; registered: {}",
-                self.entries.iter().map(|e| e.name).collect::<Vec<_>>().join(", ")
+                self.entries
+                    .iter()
+                    .map(|e| e.name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
             )),
         }
     }
@@ -56,6 +70,8 @@ impl Phenomena {
 }
 
 /// Run condition: true while the named phenomenon is enabled.
-pub fn phenomenon_enabled(name: &'static str) -> impl FnMut(Option<Res<Phenomena>>) -> bool + Clone {
+pub fn phenomenon_enabled(
+    name: &'static str,
+) -> impl FnMut(Option<Res<Phenomena>>) -> bool + Clone {
     move |p: Option<Res<Phenomena>>| p.is_some_and(|p| p.is_enabled(name))
 }

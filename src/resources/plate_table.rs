@@ -38,12 +38,16 @@ pub struct PlateTable {
 
 impl PlateTable {
     /// Builds the table from plate entities.
-    pub fn from_query(q: &Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>) -> Self {
-        Self::from_iter(q.iter().map(|(p, m, f, b, s)| (*p, *m, *f, *b, *s)))
+    pub fn from_query(
+        q: &Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
+    ) -> Self {
+        Self::from_plates(q.iter().map(|(p, m, f, b, s)| (*p, *m, *f, *b, *s)))
     }
 
     /// Builds the table from plate component tuples (any order).
-    pub fn from_iter(items: impl Iterator<Item = (Plate, PlateMotion, PlateFrame, PlateBounds, PlateStats)>) -> Self {
+    pub fn from_plates(
+        items: impl Iterator<Item = (Plate, PlateMotion, PlateFrame, PlateBounds, PlateStats)>,
+    ) -> Self {
         let mut plates: Vec<PlateState> = items
             .map(|(p, m, f, b, s)| {
                 let world_from_plate = f.world_from_plate_mat();
@@ -67,15 +71,25 @@ impl PlateTable {
         let mut by_rank: Vec<u32> = (0..plates.len() as u32).collect();
         by_rank.sort_by(|&a, &b| {
             let (pa, pb) = (&plates[a as usize], &plates[b as usize]);
-            pb.overlap_score.total_cmp(&pa.overlap_score).then(pa.id.cmp(&pb.id))
+            pb.overlap_score
+                .total_cmp(&pa.overlap_score)
+                .then(pa.id.cmp(&pb.id))
         });
-        Self { plates, slot_of_id, by_rank }
+        Self {
+            plates,
+            slot_of_id,
+            by_rank,
+        }
     }
 
     /// The slot of plate `id`, if it exists.
     #[inline]
     pub fn slot(&self, id: u32) -> Option<usize> {
-        self.slot_of_id.get(id as usize).copied().filter(|&s| s != u32::MAX).map(|s| s as usize)
+        self.slot_of_id
+            .get(id as usize)
+            .copied()
+            .filter(|&s| s != u32::MAX)
+            .map(|s| s as usize)
     }
 
     /// The plate with id `id`.

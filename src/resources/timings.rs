@@ -39,7 +39,11 @@ impl StepTimings {
         let mut ms: Vec<f64> = v.iter().map(|d| d.as_secs_f64() * 1e3).collect();
         ms.sort_by(f64::total_cmp);
         let n = ms.len();
-        Some(if n % 2 == 1 { ms[n / 2] } else { 0.5 * (ms[n / 2 - 1] + ms[n / 2]) })
+        Some(if n % 2 == 1 {
+            ms[n / 2]
+        } else {
+            0.5 * (ms[n / 2 - 1] + ms[n / 2])
+        })
     }
     /// Names with recorded timings.
     pub fn names(&self) -> impl Iterator<Item = &'static str> + '_ {

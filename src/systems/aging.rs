@@ -11,7 +11,11 @@ use crate::resources::{Crust, Orogeny};
 pub fn age_crust(params: Res<Params>, mut crust: ResMut<Crust>) {
     let dt = params.time.time_step_my as f32;
     let crust = &mut *crust;
-    crust.age_my.par_iter_mut().with_min_len(4096).for_each(|a| *a += dt);
+    crust
+        .age_my
+        .par_iter_mut()
+        .with_min_len(4096)
+        .for_each(|a| *a += dt);
     crust
         .orogeny_age_my
         .par_iter_mut()

@@ -60,7 +60,8 @@ impl ErosionRates {
             z_a: o.abyssal_elevation_km,
             z_t: o.trench_elevation_km,
             erosion_km: params.continent.erosion_mm_per_yr * dt,
-            damping_factor: (-(o.damping_mm_per_yr / o.trench_elevation_km.abs().max(1e-9)) * dt).exp(),
+            damping_factor: (-(o.damping_mm_per_yr / o.trench_elevation_km.abs().max(1e-9)) * dt)
+                .exp(),
             sediment_km: o.sediment_accretion_mm_per_yr * dt,
         }
     }

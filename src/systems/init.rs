@@ -40,24 +40,37 @@ fn smoothstep(e0: f64, e1: f64, x: f64) -> f64 {
 
 /// The centroid of initial plate `i` (per plate, from the seed).
 pub fn plate_centroid(seed: u64, i: u64) -> DVec3 {
-    unit_vector(hash3(seed, stream::PLATE_CENTROID, 2 * i), hash3(seed, stream::PLATE_CENTROID, 2 * i + 1))
+    unit_vector(
+        hash3(seed, stream::PLATE_CENTROID, 2 * i),
+        hash3(seed, stream::PLATE_CENTROID, 2 * i + 1),
+    )
 }
 
 /// The motion of initial plate `i` (per plate, from the seed): a uniform random Euler pole and an
 /// angular speed giving surface speeds up to between `min_speed_fraction`·v0 and v0.
 pub fn plate_motion(params: &Params, i: u64) -> PlateMotion {
     let seed = params.planet.seed;
-    let pole = unit_vector(hash3(seed, stream::PLATE_MOTION, 3 * i), hash3(seed, stream::PLATE_MOTION, 3 * i + 1));
+    let pole = unit_vector(
+        hash3(seed, stream::PLATE_MOTION, 3 * i),
+        hash3(seed, stream::PLATE_MOTION, 3 * i + 1),
+    );
     let f = params.plates.min_speed_fraction;
     let u = f + (1.0 - f) * unit_f64(hash3(seed, stream::PLATE_MOTION, 3 * i + 2));
     // v0 in mm/yr = km/My; ω = v / R.
     let omega = u * params.plates.max_speed_mm_per_yr / params.planet.radius_km;
-    PlateMotion { euler_pole: pole, angular_speed_rad_per_my: omega }
+    PlateMotion {
+        euler_pole: pole,
+        angular_speed_rad_per_my: omega,
+    }
 }
 
 /// Plate of each sample by warped Voronoi, plus the two-nearest distance gap used to soften the
 /// per-plate continental bias near borders.
-fn warped_voronoi(mesh: &SphereMesh, params: &Params, centroids: &[DVec3]) -> (Vec<u32>, Vec<(u32, u32, f64)>) {
+fn warped_voronoi(
+    mesh: &SphereMesh,
+    params: &Params,
+    centroids: &[DVec3],
+) -> (Vec<u32>, Vec<(u32, u32, f64)>) {
     let r = params.planet.radius_km;
     let amp = params.init.border_warp_km / r;
     let wl = params.init.border_warp_wavelength_km / r;
@@ -67,7 +80,11 @@ fn warped_voronoi(mesh: &SphereMesh, params: &Params, centroids: &[DVec3]) -> (V
         .par_iter()
         .with_min_len(1024)
         .map(|&p| {
-            let pw = if amp > 0.0 { (p + vector_fbm(wseed, p, wl, 4) * amp).normalize() } else { p };
+            let pw = if amp > 0.0 {
+                (p + vector_fbm(wseed, p, wl, 4) * amp).normalize()
+            } else {
+                p
+            };
             let (mut i1, mut i2) = (0u32, 0u32);
             let (mut best1, mut best2) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
             for (i, c) in centroids.iter().enumerate() {
@@ -82,7 +99,8 @@ fn warped_voronoi(mesh: &SphereMesh, params: &Params, centroids: &[DVec3]) -> (V
                     i2 = i as u32;
                 }
             }
-            let gap = angle_between(pw, centroids[i2 as usize]) - angle_between(pw, centroids[i1 as usize]);
+            let gap = angle_between(pw, centroids[i2 as usize])
+                - angle_between(pw, centroids[i1 as usize]);
             (i1, i2, gap)
         })
         .collect();
@@ -101,12 +119,13 @@ pub fn reference_mesh(params: &Params) -> Result<SphereMesh, MeshError> {
 
 /// Builds the initial crust and plates on `mesh`.
 pub fn initial_planet(mesh: &SphereMesh, params: &Params) -> (Crust, Vec<InitialPlate>) {
-    let mesh = mesh;
     let n = mesh.len();
     let seed = params.planet.seed;
     let r = params.planet.radius_km;
     let n_plates = params.init.plates as usize;
-    let centroids: Vec<DVec3> = (0..n_plates as u64).map(|i| plate_centroid(seed, i)).collect();
+    let centroids: Vec<DVec3> = (0..n_plates as u64)
+        .map(|i| plate_centroid(seed, i))
+        .collect();
     let (mut plate, nearest) = warped_voronoi(mesh, params, &centroids);
     let mut unused = n_plates as u32;
     defragment_plates(mesh, &mut plate, f64::INFINITY, false, &mut unused);
@@ -134,7 +153,11 @@ pub fn initial_planet(mesh: &SphereMesh, params: &Params) -> (Crust, Vec<Initial
     let total_area: f64 = mesh.area_km2.iter().sum();
     let target = params.init.continental_fraction * total_area;
     let mut order: Vec<u32> = (0..n as u32).collect();
-    order.par_sort_unstable_by(|&a, &b| score[b as usize].total_cmp(&score[a as usize]).then(a.cmp(&b)));
+    order.par_sort_unstable_by(|&a, &b| {
+        score[b as usize]
+            .total_cmp(&score[a as usize])
+            .then(a.cmp(&b))
+    });
     let mut acc = 0.0;
     let mut threshold = f64::INFINITY;
     for &s in &order {
@@ -170,10 +193,15 @@ pub fn initial_planet(mesh: &SphereMesh, params: &Params) -> (Crust, Vec<Initial
                 *age = (1500.0 + 500.0 * fbm(aseed, p, cont_wl, 3)) as f32;
             } else {
                 let o = &params.ocean;
-                let zo = (i.oceanic_elevation_km + 2.0 * i.elevation_noise_km * fbm(oseed, p, cont_wl / 2.0, 4))
-                    .clamp(o.abyssal_elevation_km, o.ridge_elevation_km);
+                let zo = (i.oceanic_elevation_km
+                    + 2.0 * i.elevation_noise_km * fbm(oseed, p, cont_wl / 2.0, 4))
+                .clamp(o.abyssal_elevation_km, o.ridge_elevation_km);
                 // Shallower floor close to the continents (continental rise).
-                let margin = if target > 0.0 { smoothstep(0.0, 0.1, threshold - s) } else { 1.0 };
+                let margin = if target > 0.0 {
+                    smoothstep(0.0, 0.1, threshold - s)
+                } else {
+                    1.0
+                };
                 let zo = -1.5 * (1.0 - margin) + zo * margin;
                 *z = zo as f32;
                 *ct = CrustType::Oceanic;
@@ -192,10 +220,17 @@ pub fn initial_planet(mesh: &SphereMesh, params: &Params) -> (Crust, Vec<Initial
     }
     let plates: Vec<InitialPlate> = (0..n_plates)
         .filter(|&k| present[k])
-        .map(|k| InitialPlate { id: PlateId(k as u32), motion: plate_motion(params, k as u64) })
+        .map(|k| InitialPlate {
+            id: PlateId(k as u32),
+            motion: plate_motion(params, k as u64),
+        })
         .collect();
     if plates.len() < n_plates {
-        tracing::warn!(asked = n_plates, made = plates.len(), "some initial plates got no samples and were dropped");
+        tracing::warn!(
+            asked = n_plates,
+            made = plates.len(),
+            "some initial plates got no samples and were dropped"
+        );
     }
     (crust, plates)
 }

@@ -32,7 +32,8 @@ use crate::systems::resample::{GapSample, ResampleWork};
 pub fn ocean_floor_elevation_km(age_my: f64, params: &Params) -> f64 {
     let o = &params.ocean;
     let k = o.damping_mm_per_yr / o.trench_elevation_km.abs().max(1e-9);
-    let z = o.trench_elevation_km + (o.ridge_elevation_km - o.trench_elevation_km) * (-k * age_my.max(0.0)).exp();
+    let z = o.trench_elevation_km
+        + (o.ridge_elevation_km - o.trench_elevation_km) * (-k * age_my.max(0.0)).exp();
     z.max(o.abyssal_elevation_km)
 }
 
@@ -50,18 +51,35 @@ pub fn ocean_floor_age_my(z_km: f64, params: &Params) -> f64 {
 }
 
 /// One gap sample turned into ridge crust: (elevation km, age My, ridge direction).
-pub fn ridge_crust(mesh: &SphereMesh, params: &Params, elevation_km: &[f32], elapsed_my: f64, g: &GapSample) -> Option<(f32, f32, [f32; 3])> {
+pub fn ridge_crust(
+    mesh: &SphereMesh,
+    params: &Params,
+    elevation_km: &[f32],
+    elapsed_my: f64,
+    g: &GapSample,
+) -> Option<(f32, f32, [f32; 3])> {
     let a = g.nearest?;
     let q = mesh.positions[g.sample as usize];
     let z1 = elevation_km[a.seed as usize] as f64;
     let (alpha, z_bar, ridge) = match g.second {
         Some(b) => {
-            let (d1, d2) = (a.distance_rad.min(b.distance_rad), a.distance_rad.max(b.distance_rad));
+            let (d1, d2) = (
+                a.distance_rad.min(b.distance_rad),
+                a.distance_rad.max(b.distance_rad),
+            );
             let z2 = elevation_km[b.seed as usize] as f64;
-            let (za, zb) = if a.distance_rad <= b.distance_rad { (z1, z2) } else { (z2, z1) };
+            let (za, zb) = if a.distance_rad <= b.distance_rad {
+                (z1, z2)
+            } else {
+                (z2, z1)
+            };
             let sum = d1 + d2;
             let alpha = if sum > 0.0 { (d2 - d1) / sum } else { 0.0 };
-            let z_bar = if sum > 0.0 { (d2 * za + d1 * zb) / sum } else { za };
+            let z_bar = if sum > 0.0 {
+                (d2 * za + d1 * zb) / sum
+            } else {
+                za
+            };
             let across = mesh.positions[b.seed as usize] - mesh.positions[a.seed as usize];
             let across = across - q * q.dot(across);
             let ridge = q.cross(across).try_normalize().unwrap_or(DVec3::ZERO);
@@ -72,11 +90,19 @@ pub fn ridge_crust(mesh: &SphereMesh, params: &Params, elevation_km: &[f32], ela
     let age = alpha * elapsed_my;
     let z_ridge = ocean_floor_elevation_km(age, params);
     let z = (alpha * z_bar + (1.0 - alpha) * z_ridge).min(params.ocean.ridge_elevation_km);
-    Some((z as f32, age as f32, [ridge.x as f32, ridge.y as f32, ridge.z as f32]))
+    Some((
+        z as f32,
+        age as f32,
+        [ridge.x as f32, ridge.y as f32, ridge.z as f32],
+    ))
 }
 
 /// Fills the gaps of the resampling in progress with new oceanic crust.
-pub fn generate_oceanic_crust(mesh: Res<SphereMesh>, params: Res<Params>, mut work: ResMut<ResampleWork>) {
+pub fn generate_oceanic_crust(
+    mesh: Res<SphereMesh>,
+    params: Res<Params>,
+    mut work: ResMut<ResampleWork>,
+) {
     if !work.active {
         return;
     }

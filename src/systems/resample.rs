@@ -20,7 +20,9 @@ use bevy_ecs::prelude::*;
 use glam::{DQuat, DVec3};
 use rayon::prelude::*;
 
-use crate::components::{Plate, PlateBounds, PlateFrame, PlateId, PlateMesh, PlateMotion, PlateStats};
+use crate::components::{
+    Plate, PlateBounds, PlateFrame, PlateId, PlateMesh, PlateMotion, PlateStats,
+};
 use crate::geometry::{SphereMesh, angle_between};
 use crate::io::params::Params;
 use crate::resources::{
@@ -39,7 +41,11 @@ pub struct SampleSource {
 }
 
 impl SampleSource {
-    const GAP: SampleSource = SampleSource { slot: u32::MAX, triangle: 0, weights: [0.0; 3] };
+    const GAP: SampleSource = SampleSource {
+        slot: u32::MAX,
+        triangle: 0,
+        weights: [0.0; 3],
+    };
     /// True when no plate covers the sample.
     pub fn is_gap(&self) -> bool {
         self.slot == u32::MAX
@@ -102,32 +108,40 @@ impl CellPlates {
             .plate
             .par_iter()
             .with_min_len(4096)
-            .map(|&p| table.slot(p).map_or(Self::EMPTY, |s| s.min(Self::MANY as usize - 1) as u16))
+            .map(|&p| {
+                table
+                    .slot(p)
+                    .map_or(Self::EMPTY, |s| s.min(Self::MANY as usize - 1) as u16)
+            })
             .collect();
         let loc = mesh.locator();
         let mut cells = vec![[Self::EMPTY; 4]; loc.cell_count()];
         let many_slots = table.len() >= Self::MANY as usize;
-        cells.par_iter_mut().enumerate().with_min_len(1024).for_each(|(c, list)| {
-            if many_slots {
-                *list = [Self::MANY, Self::EMPTY, Self::EMPTY, Self::EMPTY];
-                return;
-            }
-            let mut n = 0;
-            for &t in loc.cell_triangles(c) {
-                for &v in &mesh.triangles[t as usize] {
-                    let s = slot_of_sample[v as usize];
-                    if s == Self::EMPTY || list[..n].contains(&s) {
-                        continue;
-                    }
-                    if n == 4 {
-                        *list = [Self::MANY, Self::EMPTY, Self::EMPTY, Self::EMPTY];
-                        return;
-                    }
-                    list[n] = s;
-                    n += 1;
+        cells
+            .par_iter_mut()
+            .enumerate()
+            .with_min_len(1024)
+            .for_each(|(c, list)| {
+                if many_slots {
+                    *list = [Self::MANY, Self::EMPTY, Self::EMPTY, Self::EMPTY];
+                    return;
                 }
-            }
-        });
+                let mut n = 0;
+                for &t in loc.cell_triangles(c) {
+                    for &v in &mesh.triangles[t as usize] {
+                        let s = slot_of_sample[v as usize];
+                        if s == Self::EMPTY || list[..n].contains(&s) {
+                            continue;
+                        }
+                        if n == 4 {
+                            *list = [Self::MANY, Self::EMPTY, Self::EMPTY, Self::EMPTY];
+                            return;
+                        }
+                        list[n] = s;
+                        n += 1;
+                    }
+                }
+            });
         Self { cells }
     }
 
@@ -140,20 +154,38 @@ impl CellPlates {
 }
 
 /// Finds, for every reference sample, the plate that covers it and where (see module docs).
-pub fn locate_sources(mesh: &SphereMesh, old: &Crust, table: &PlateTable, sources: &mut Vec<SampleSource>) {
+pub fn locate_sources(
+    mesh: &SphereMesh,
+    old: &Crust,
+    table: &PlateTable,
+    sources: &mut Vec<SampleSource>,
+) {
     let t = Instant::now();
     let cell_plates = CellPlates::build(mesh, old, table);
-    tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "resample: cell plates");
+    tracing::debug!(
+        ms = t.elapsed().as_secs_f64() * 1e3,
+        "resample: cell plates"
+    );
     sources.clear();
     sources.resize(mesh.len(), SampleSource::GAP);
-    sources.par_iter_mut().enumerate().with_min_len(1024).for_each(|(j, src)| {
-        *src = locate_one(mesh, old, table, &cell_plates, mesh.positions[j]);
-    });
+    sources
+        .par_iter_mut()
+        .enumerate()
+        .with_min_len(1024)
+        .for_each(|(j, src)| {
+            *src = locate_one(mesh, old, table, &cell_plates, mesh.positions[j]);
+        });
 }
 
 /// The covering plate of world point `q` (see module docs); `SampleSource::GAP` if none.
 #[inline]
-pub fn locate_one(mesh: &SphereMesh, old: &Crust, table: &PlateTable, cells: &CellPlates, q: DVec3) -> SampleSource {
+pub fn locate_one(
+    mesh: &SphereMesh,
+    old: &Crust,
+    table: &PlateTable,
+    cells: &CellPlates,
+    q: DVec3,
+) -> SampleSource {
     let mut fallback = SampleSource::GAP;
     let locator = mesh.locator();
     for &slot in &table.by_rank {
@@ -168,11 +200,19 @@ pub fn locate_one(mesh: &SphereMesh, old: &Crust, table: &PlateTable, cells: &Ce
         }
         let loc = locator.locate_in_cell(&mesh.positions, &mesh.triangles, ql, cell);
         let tri = mesh.triangles[loc.triangle as usize];
-        let owners = [old.plate[tri[0] as usize], old.plate[tri[1] as usize], old.plate[tri[2] as usize]];
+        let owners = [
+            old.plate[tri[0] as usize],
+            old.plate[tri[1] as usize],
+            old.plate[tri[2] as usize],
+        ];
         if !owners.contains(&p.id) {
             continue;
         }
-        let found = SampleSource { slot, triangle: loc.triangle, weights: loc.weights };
+        let found = SampleSource {
+            slot,
+            triangle: loc.triangle,
+            weights: loc.weights,
+        };
         if owners[loc.dominant_corner()] == p.id {
             return found;
         }
@@ -199,10 +239,25 @@ fn dominant(w: &[f64; 3]) -> usize {
 /// come from the nearest vertex; direction
 /// fields are interpolated in the plate frame, rotated to the world and projected onto the
 /// tangent plane.
-pub fn interpolate(mesh: &SphereMesh, old: &Crust, table: &PlateTable, sources: &[SampleSource], next: &mut Crust) {
+pub fn interpolate(
+    mesh: &SphereMesh,
+    old: &Crust,
+    table: &PlateTable,
+    sources: &[SampleSource],
+    next: &mut Crust,
+) {
     next.resize(mesh.len());
-    let Crust { elevation_km, thickness_km, crust_type, age_my, ridge_dir, orogeny, orogeny_age_my, fold_dir, plate } =
-        next;
+    let Crust {
+        elevation_km,
+        thickness_km,
+        crust_type,
+        age_my,
+        ridge_dir,
+        orogeny,
+        orogeny_age_my,
+        fold_dir,
+        plate,
+    } = next;
     (
         elevation_km.par_iter_mut(),
         thickness_km.par_iter_mut(),
@@ -234,7 +289,9 @@ pub fn interpolate(mesh: &SphereMesh, old: &Crust, table: &PlateTable, sources: 
             let t = mesh.triangles[src.triangle as usize];
             let v = [t[0] as usize, t[1] as usize, t[2] as usize];
             let w = src.weights;
-            let lerp = |f: &[f32]| (w[0] * f[v[0]] as f64 + w[1] * f[v[1]] as f64 + w[2] * f[v[2]] as f64) as f32;
+            let lerp = |f: &[f32]| {
+                (w[0] * f[v[0]] as f64 + w[1] * f[v[1]] as f64 + w[2] * f[v[2]] as f64) as f32
+            };
             let plate_state = &table.plates[src.slot as usize];
             let dir = |f: &[[f32; 3]]| -> [f32; 3] {
                 let mut acc = DVec3::ZERO;
@@ -254,8 +311,15 @@ pub fn interpolate(mesh: &SphereMesh, old: &Crust, table: &PlateTable, sources: 
             *e = lerp(&old.thickness_km);
             // Crust type by weighted vote (the 0.5 level of the interpolated indicator): smoother
             // coastlines than the nearest vertex, which roughens them at every resampling.
-            let cont: f64 = (0..3).filter(|&k| old.crust_type[v[k]] == CrustType::Continental).map(|k| w[k]).sum();
-            *ct = if cont >= 0.5 { CrustType::Continental } else { CrustType::Oceanic };
+            let cont: f64 = (0..3)
+                .filter(|&k| old.crust_type[v[k]] == CrustType::Continental)
+                .map(|k| w[k])
+                .sum();
+            *ct = if cont >= 0.5 {
+                CrustType::Continental
+            } else {
+                CrustType::Oceanic
+            };
             *age = lerp(&old.age_my);
             *rd = dir(&old.ridge_dir);
             *og = old.orogeny[d];
@@ -270,8 +334,14 @@ pub fn interpolate(mesh: &SphereMesh, old: &Crust, table: &PlateTable, sources: 
 /// order of true great-circle distance to their seed (never hop counts), two labels of distinct
 /// plates per sample at most.
 pub fn nearest_two_plates(mesh: &SphereMesh, plate: &[u32], gaps: &[u32]) -> Vec<GapSample> {
-    let mut out: Vec<GapSample> =
-        gaps.iter().map(|&g| GapSample { sample: g, nearest: None, second: None }).collect();
+    let mut out: Vec<GapSample> = gaps
+        .iter()
+        .map(|&g| GapSample {
+            sample: g,
+            nearest: None,
+            second: None,
+        })
+        .collect();
     if gaps.is_empty() {
         return out;
     }
@@ -284,13 +354,14 @@ pub fn nearest_two_plates(mesh: &SphereMesh, plate: &[u32], gaps: &[u32]) -> Vec
     // bucket. Inside a bucket, entries are taken in insertion order, which is deterministic.
     let width = 0.25 * mesh.mean_spacing_rad();
     let mut buckets: Vec<Vec<(u32, u32, f64)>> = Vec::new();
-    let push = |buckets: &mut Vec<Vec<(u32, u32, f64)>>, current: usize, d: f64, node: u32, seed: u32| {
-        let b = ((d / width) as usize).max(current);
-        if b >= buckets.len() {
-            buckets.resize_with(b + 1, Vec::new);
-        }
-        buckets[b].push((node, seed, d));
-    };
+    let push =
+        |buckets: &mut Vec<Vec<(u32, u32, f64)>>, current: usize, d: f64, node: u32, seed: u32| {
+            let b = ((d / width) as usize).max(current);
+            if b >= buckets.len() {
+                buckets.resize_with(b + 1, Vec::new);
+            }
+            buckets[b].push((node, seed, d));
+        };
     for &g in gaps {
         for &nb in mesh.neighbors_of(g as usize) {
             if gap_index[nb as usize] == u32::MAX && plate[nb as usize] != NO_PLATE {
@@ -306,7 +377,11 @@ pub fn nearest_two_plates(mesh: &SphereMesh, plate: &[u32], gaps: &[u32]) -> Vec
             let (node, seed, d) = buckets[current][k];
             k += 1;
             let p = plate[seed as usize];
-            let label = GapNeighbour { plate: p, seed, distance_rad: d };
+            let label = GapNeighbour {
+                plate: p,
+                seed,
+                distance_rad: d,
+            };
             let gs = &mut out[gap_index[node as usize] as usize];
             match (gs.nearest, gs.second) {
                 (None, _) => gs.nearest = Some(label),
@@ -471,7 +546,13 @@ pub struct PlateGeometry {
 /// Computes each plate's samples, triangles, bounding cap and areas from a crust on the
 /// reference mesh. Indexed by plate id (plates without samples get `None`).
 pub fn plate_geometry(mesh: &SphereMesh, crust: &Crust) -> Vec<Option<PlateGeometry>> {
-    let max_id = crust.plate.iter().copied().filter(|&p| p != NO_PLATE).max().map_or(0, |m| m as usize + 1);
+    let max_id = crust
+        .plate
+        .iter()
+        .copied()
+        .filter(|&p| p != NO_PLATE)
+        .max()
+        .map_or(0, |m| m as usize + 1);
     let mut out: Vec<Option<PlateGeometry>> = vec![None; max_id];
     let mut centroid_sum = vec![DVec3::ZERO; max_id];
     for (s, &p) in crust.plate.iter().enumerate() {
@@ -488,7 +569,11 @@ pub fn plate_geometry(mesh: &SphereMesh, crust: &Crust) -> Vec<Option<PlateGeome
         centroid_sum[p as usize] += mesh.positions[s] * a;
     }
     for (t, tri) in mesh.triangles.iter().enumerate() {
-        let o = [crust.plate[tri[0] as usize], crust.plate[tri[1] as usize], crust.plate[tri[2] as usize]];
+        let o = [
+            crust.plate[tri[0] as usize],
+            crust.plate[tri[1] as usize],
+            crust.plate[tri[2] as usize],
+        ];
         for k in 0..3 {
             if o[k] == NO_PLATE || o[..k].contains(&o[k]) {
                 continue;
@@ -500,12 +585,17 @@ pub fn plate_geometry(mesh: &SphereMesh, crust: &Crust) -> Vec<Option<PlateGeome
     }
     out.par_iter_mut().enumerate().for_each(|(id, g)| {
         let Some(g) = g.as_mut() else { return };
-        let centroid = centroid_sum[id].try_normalize().unwrap_or_else(|| mesh.positions[g.mesh.samples[0] as usize]);
+        let centroid = centroid_sum[id]
+            .try_normalize()
+            .unwrap_or_else(|| mesh.positions[g.mesh.samples[0] as usize]);
         let mut radius: f64 = 0.0;
         for &s in &g.mesh.samples {
             radius = radius.max(angle_between(centroid, mesh.positions[s as usize]));
         }
-        g.bounds = Some(PlateBounds { centroid, cap_radius_rad: radius + 1.5 * mesh.max_edge_rad });
+        g.bounds = Some(PlateBounds {
+            centroid,
+            cap_radius_rad: radius + 1.5 * mesh.max_edge_rad,
+        });
     });
     out
 }
@@ -522,7 +612,10 @@ pub fn resample_due(
         return true;
     }
     let steps = clock.steps_since_resample;
-    let (min_steps, max_steps) = (params.resample.min_interval_steps, params.resample.max_interval_steps);
+    let (min_steps, max_steps) = (
+        params.resample.min_interval_steps,
+        params.resample.max_interval_steps,
+    );
     if steps >= max_steps {
         return true;
     }
@@ -556,8 +649,13 @@ pub fn resample_interpolate(
     lap("locate", &mut t);
     interpolate(&mesh, &crust, &table, &work.sources, &mut work.next);
     lap("interpolate", &mut t);
-    let gap_ids: Vec<u32> =
-        work.sources.iter().enumerate().filter(|(_, s)| s.is_gap()).map(|(j, _)| j as u32).collect();
+    let gap_ids: Vec<u32> = work
+        .sources
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.is_gap())
+        .map(|(j, _)| j as u32)
+        .collect();
     work.gaps = nearest_two_plates(&mesh, &work.next.plate, &gap_ids);
     lap("nearest plates of gaps", &mut t);
     fill_gaps_from_nearest(&mut work.next, &work.gaps);
@@ -571,7 +669,9 @@ pub fn resample_interpolate(
 /// plate entities (samples, triangles, caps, areas), despawns empty plates, spawns split-off
 /// pieces and resets every frame to the identity.
 pub fn resample_rebuild(world: &mut World) {
-    let Some(mut work) = world.get_resource_mut::<ResampleWork>() else { return };
+    let Some(mut work) = world.get_resource_mut::<ResampleWork>() else {
+        return;
+    };
     if !work.active {
         return;
     }
@@ -595,7 +695,10 @@ pub fn resample_rebuild(world: &mut World) {
     // Keep the old buffers for the next resampling.
     world.resource_mut::<ResampleWork>().next = next;
     rebuild_plate_entities(world, &splits);
-    tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "resample: rebuild plates");
+    tracing::debug!(
+        ms = t.elapsed().as_secs_f64() * 1e3,
+        "resample: rebuild plates"
+    );
     {
         let mut clock = world.resource_mut::<SimClock>();
         clock.steps_since_resample = 0;
@@ -603,7 +706,9 @@ pub fn resample_rebuild(world: &mut World) {
     }
     world.resource_mut::<ResampleRequest>().0 = false;
     if let Some(t0) = started {
-        world.resource_mut::<StepTimings>().record("resampling", t0.elapsed());
+        world
+            .resource_mut::<StepTimings>()
+            .record("resampling", t0.elapsed());
     }
 }
 
@@ -626,8 +731,13 @@ pub fn rebuild_plate_entities(world: &mut World, splits: &[PlateSplit]) {
     for (entity, id, _) in &existing {
         match geometry.get_mut(*id as usize).and_then(|g| g.take()) {
             Some(g) => {
-                let bounds = g.bounds.unwrap_or(PlateBounds { centroid: DVec3::Z, cap_radius_rad: std::f64::consts::PI });
-                world.entity_mut(*entity).insert((g.mesh, bounds, g.stats, PlateFrame::default()));
+                let bounds = g.bounds.unwrap_or(PlateBounds {
+                    centroid: DVec3::Z,
+                    cap_radius_rad: std::f64::consts::PI,
+                });
+                world
+                    .entity_mut(*entity)
+                    .insert((g.mesh, bounds, g.stats, PlateFrame::default()));
             }
             None => {
                 tracing::debug!(plate = id, "plate has no samples left: despawned");
@@ -636,14 +746,40 @@ pub fn rebuild_plate_entities(world: &mut World, splits: &[PlateSplit]) {
         }
     }
     for split in splits {
-        let Some(g) = geometry.get_mut(split.child as usize).and_then(|g| g.take()) else { continue };
+        let Some(g) = geometry
+            .get_mut(split.child as usize)
+            .and_then(|g| g.take())
+        else {
+            continue;
+        };
         let motion = existing
             .iter()
             .find(|e| e.1 == split.parent)
             .map(|e| e.2)
-            .unwrap_or(PlateMotion { euler_pole: DVec3::Z, angular_speed_rad_per_my: 0.0 });
-        let bounds = g.bounds.unwrap_or(PlateBounds { centroid: DVec3::Z, cap_radius_rad: std::f64::consts::PI });
-        tracing::debug!(child = split.child, parent = split.parent, "plate piece split off");
-        world.spawn((Plate { id: PlateId(split.child) }, motion, PlateFrame { world_from_plate: DQuat::IDENTITY }, g.mesh, bounds, g.stats));
+            .unwrap_or(PlateMotion {
+                euler_pole: DVec3::Z,
+                angular_speed_rad_per_my: 0.0,
+            });
+        let bounds = g.bounds.unwrap_or(PlateBounds {
+            centroid: DVec3::Z,
+            cap_radius_rad: std::f64::consts::PI,
+        });
+        tracing::debug!(
+            child = split.child,
+            parent = split.parent,
+            "plate piece split off"
+        );
+        world.spawn((
+            Plate {
+                id: PlateId(split.child),
+            },
+            motion,
+            PlateFrame {
+                world_from_plate: DQuat::IDENTITY,
+            },
+            g.mesh,
+            bounds,
+            g.stats,
+        ));
     }
 }

@@ -14,7 +14,10 @@ pub fn params(samples: u64, seed: u64) -> Params {
 
 /// Area of the samples selected by `pick`, km².
 pub fn area_where(mesh: &SphereMesh, pick: impl Fn(usize) -> bool) -> f64 {
-    (0..mesh.len()).filter(|&i| pick(i)).map(|i| mesh.area_km2[i]).sum()
+    (0..mesh.len())
+        .filter(|&i| pick(i))
+        .map(|i| mesh.area_km2[i])
+        .sum()
 }
 
 /// Continental area of a crust, km².
@@ -52,7 +55,11 @@ pub fn spearman(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// Connected pieces of the samples with `same(i, j)`, as lists of sample indices.
-pub fn components(mesh: &SphereMesh, member: impl Fn(usize) -> bool, same: impl Fn(usize, usize) -> bool) -> Vec<Vec<usize>> {
+pub fn components(
+    mesh: &SphereMesh,
+    member: impl Fn(usize) -> bool,
+    same: impl Fn(usize, usize) -> bool,
+) -> Vec<Vec<usize>> {
     let n = mesh.len();
     let mut seen = vec![false; n];
     let mut out = Vec::new();

@@ -242,7 +242,7 @@ impl SphereMesh {
                 self.euler_characteristic()
             )));
         }
-        Ok(())
+        assert!(triple(a, b, c) > 0.0);
     }
 }
 

@@ -242,7 +242,7 @@ impl SphereMesh {
                 self.euler_characteristic()
             )));
         }
-        assert!(triple(a, b, c) > 0.0);
+        Ok(())
     }
 }
 
@@ -283,7 +283,7 @@ mod tests {
                     m.positions[t[1] as usize],
                     m.positions[t[2] as usize],
                 );
-                asserttriple(a, b, c).partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater);
+                assert!(triple(a, b, c) > 0.0);
             }
             let area = m.total_area_km2();
             let sphere = 4.0 * std::f64::consts::PI * 6370.0f64.powi(2);

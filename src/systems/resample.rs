@@ -36,8 +36,9 @@ pub struct SampleSource {
     pub slot: u32,
     /// Triangle of the reference mesh, in the plate frame.
     pub triangle: u32,
-    /// Barycentric weights in that triangle.
-    pub weights: [f64; 3],
+    /// Barycentric weights in that triangle (f32 is plenty for interpolating f32 fields, and a
+    /// weight of exactly 1 stays exactly 1).
+    pub weights: [f32; 3],
 }
 
 impl SampleSource {
@@ -211,7 +212,7 @@ pub fn locate_one(
         let found = SampleSource {
             slot,
             triangle: loc.triangle,
-            weights: loc.weights,
+            weights: loc.weights.map(|w| w as f32),
         };
         if owners[loc.dominant_corner()] == p.id {
             return found;
@@ -288,7 +289,7 @@ pub fn interpolate(
             }
             let t = mesh.triangles[src.triangle as usize];
             let v = [t[0] as usize, t[1] as usize, t[2] as usize];
-            let w = src.weights;
+            let w = src.weights.map(|w| w as f64);
             let lerp = |f: &[f32]| {
                 (w[0] * f[v[0]] as f64 + w[1] * f[v[1]] as f64 + w[2] * f[v[2]] as f64) as f32
             };

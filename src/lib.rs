@@ -20,14 +20,16 @@ pub use simulation::{SimError, Simulation};
 /// What a user or plugin author imports.
 pub mod prelude {
     pub use crate::components::{
-        Plate, PlateBounds, PlateFrame, PlateId, PlateMesh, PlateMotion, PlateStats,
+        FrontKind, Plate, PlateBounds, PlateFrame, PlateId, PlateMesh, PlateMotion, PlateStats,
+        SubductionFront, Terrane,
     };
     pub use crate::geometry::SphereMesh;
     pub use crate::io::params::{ParamError, ParamValue, Params};
     pub use crate::plugins::{
-        AgingPlugin, DiagnosticsPlugin, DriftPlugin, ErosionPlugin, OceanicCrustPlugin,
-        PhenomenonAppExt, ResamplePlugin, ResampleSystems, TectonicPlugins, TectonicStep,
-        TectonicSystems,
+        AfterResample, AfterResampleSystems, AgingPlugin, CollisionPlugin, DiagnosticsPlugin,
+        DriftPlugin, ErosionPlugin, OceanicCrustPlugin, PhenomenonAppExt, ResamplePlugin,
+        ResampleSystems, SlabPullPlugin, SubductionPlugin, TectonicPlugins, TectonicStep,
+        TectonicSystems, TerranePlugin,
     };
     pub use crate::resources::{Crust, CrustType, Orogeny, Phenomena, phenomenon_enabled};
     pub use crate::simulation::{SimError, Simulation};

@@ -102,6 +102,7 @@ impl Simulation {
             ));
         }
         resample::rebuild_plate_entities(world, &[]);
+        let _ = world.try_run_schedule(crate::plugins::AfterResample);
         timings.record("initial_planet", t1.elapsed());
         *world.resource_mut::<StepTimings>() = timings;
         let mut sim = Self { app };
@@ -287,6 +288,7 @@ impl Simulation {
             .max(world.resource::<NextPlateId>().0);
         world.resource_mut::<NextPlateId>().0 = next;
         resample::rebuild_plate_entities(world, &[]);
+        let _ = world.try_run_schedule(crate::plugins::AfterResample);
         self.refresh_stats();
         Ok(())
     }
@@ -331,7 +333,15 @@ impl Simulation {
         }
         let mut sources = Vec::new();
         let mut next = Crust::default();
-        resample::locate_sources(mesh, crust, &table, &mut sources);
+        let pairs = world
+            .get_resource::<crate::resources::OverridePairs>()
+            .map(|p| p.0.clone())
+            .unwrap_or_default();
+        let rules = resample::OverlapRules {
+            pairs: &pairs,
+            ..Default::default()
+        };
+        resample::locate_sources(mesh, crust, &table, &rules, &mut sources);
         resample::interpolate(mesh, crust, &table, &sources, &mut next);
         let gap_ids: Vec<u32> = sources
             .iter()

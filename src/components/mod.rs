@@ -100,3 +100,46 @@ impl PlateStats {
         100.0 * self.continental_area_km2 - (self.area_km2 - self.continental_area_km2)
     }
 }
+
+/// Which crust goes under at a subduction front (paper §4.1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum FrontKind {
+    /// Oceanic crust plunges beneath continental crust.
+    OceanUnderContinent,
+    /// The older of two oceanic plates plunges beneath the younger (island arcs).
+    OceanUnderOcean,
+    /// Continental against continental: a forced subduction that turns into a collision.
+    Forced,
+}
+
+/// A converging boundary between two plates: one connected run of converging plate-boundary
+/// edges between the same overriding and subducting plates, found at each resampling.
+#[derive(Component, Clone, Debug, PartialEq)]
+pub struct SubductionFront {
+    /// The plate that stays on top.
+    pub overriding: PlateId,
+    /// The plate that goes under.
+    pub subducting: PlateId,
+    /// What goes under what.
+    pub kind: FrontKind,
+    /// The front's points: indices into [`FrontPoints`](crate::resources::FrontPoints).
+    pub points: Vec<u32>,
+    /// Length of the front, km.
+    pub length_km: f64,
+}
+
+/// A terrane (paper §3): a connected region of continental crust within one plate, from a small
+/// island to a whole continent. Rebuilt at each resampling.
+#[derive(Component, Clone, Debug, PartialEq)]
+pub struct Terrane {
+    /// Index of the terrane in [`TerraneField`](crate::resources::TerraneField).
+    pub index: u32,
+    /// The plate that carries it.
+    pub plate: PlateId,
+    /// Its area, km².
+    pub area_km2: f64,
+    /// Its area-weighted centroid, plate frame.
+    pub centroid: DVec3,
+    /// Number of samples.
+    pub samples: u32,
+}

@@ -465,13 +465,17 @@ define_params! {
         control_distance_km: f64 = 637.0, 1.0..=10000.0, "km", "Distance from the front where subduction uplift peaks (Driftworld r_c = 0.1 R).";
         uplift_mm_per_yr: f64 = 0.6, 0.0..=100.0, "mm/yr", "Base subduction uplift u0.";
         fold_weight: f64 = 0.1, 0.0..=10.0, "", "β: weight of the relative plate velocity in the fold direction update.";
-        slab_pull_perturbation: f64 = 1.0, 0.0..=100.0, "", "Slab pull ε, normalised by samples per plate (Driftworld ε).";
+        slab_pull_perturbation: f64 = 1.0, 0.0..=100.0, "", "Slab pull ε: the Euler pole of a subducting plate turns by 0.01·ε rad/My per radian of subduction front (normalised by front length, so independent of the sample count).";
+        trench_width_km: f64 = 200.0, 1.0..=2000.0, "km", "Width of the trench on the subducting plate in front of a subduction front.";
+        trench_rate: f64 = 0.3, 0.0..=1.0, "fraction per step", "Fraction of the gap to the trench profile (z_t at the front, z_a at the trench edge) closed each step.";
+        min_convergence_mm_per_yr: f64 = 5.0, 0.0..=1000.0, "mm/yr", "Plate boundaries converging slower than this make no subduction front.";
     }
     /// Continental collision.
     [collision] Collision {
         distance_km: f64 = 4200.0, 10.0..=20000.0, "km", "Maximum collision influence distance r_c.";
         coefficient_per_km: f64 = 1.3e-5, 0.0..=1.0, "1/km", "Discrete collision coefficient Δ_c.";
         interpenetration_km: f64 = 300.0, 0.0..=5000.0, "km", "Interpenetration of continental crust that triggers a collision.";
+        max_uplift_km: f64 = 4.0, 0.0..=30.0, "km", "Saturation of the collision surge: Δz = H·(1 − exp(−Δ_c·A/H)), Δ_c·A for small terranes, at most H for continents.";
     }
     /// Plate rifting.
     [rifting] Rifting {

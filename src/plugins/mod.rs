@@ -26,11 +26,28 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::{ScheduleLabel, SingleThreadedExecutor};
 
 use crate::resources::{Phenomena, ResampleRequest, SimClock, StepTimings, phenomenon_enabled};
-use crate::systems::{aging, diagnostics, drift, erosion, oceanic_crust, resample};
+use crate::systems::{aging, convergence, diagnostics, drift, erosion, oceanic_crust, resample};
 
 /// The schedule that runs one tectonic time step.
 #[derive(ScheduleLabel, Clone, Debug, PartialEq, Eq, Hash)]
 pub struct TectonicStep;
+
+/// A schedule run right after every global resampling (and once on the initial planet), when
+/// every plate is in the reference frame: collision uplift, terranes and subduction fronts are
+/// (re)built here, in the chained sets [`AfterResampleSystems`].
+#[derive(ScheduleLabel, Clone, Debug, PartialEq, Eq, Hash)]
+pub struct AfterResample;
+
+/// The ordered phases of [`AfterResample`].
+#[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum AfterResampleSystems {
+    /// Uplift around terranes sutured by the resampling.
+    Collision,
+    /// Terranes rebuilt.
+    Terranes,
+    /// Subduction fronts and distance fields rebuilt.
+    Fronts,
+}
 
 /// The ordered phases of a step (see the module documentation).
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -137,13 +154,30 @@ impl Plugin for TectonicSchedulePlugin {
         let mut schedule = Schedule::new(TectonicStep);
         schedule.set_executor(SingleThreadedExecutor::new());
         app.add_schedule(schedule);
+        let mut after = Schedule::new(AfterResample);
+        after.set_executor(SingleThreadedExecutor::new());
+        app.add_schedule(after);
+        app.configure_sets(
+            AfterResample,
+            (
+                AfterResampleSystems::Collision,
+                AfterResampleSystems::Terranes,
+                AfterResampleSystems::Fronts,
+            )
+                .chain(),
+        );
         app.init_resource::<Phenomena>()
             .init_resource::<StepTimings>()
             .init_resource::<SimClock>()
             .init_resource::<ResampleRequest>()
             .init_resource::<resample::ResampleWork>()
             .init_resource::<diagnostics::CrustHealth>()
-            .init_resource::<crate::resources::CrustStats>();
+            .init_resource::<crate::resources::CrustStats>()
+            .init_resource::<crate::resources::FrontPoints>()
+            .init_resource::<crate::resources::ConvergenceField>()
+            .init_resource::<crate::resources::OverridePairs>()
+            .init_resource::<crate::resources::TerraneField>()
+            .init_resource::<crate::resources::Sutures>();
         for set in TectonicSystems::ALL {
             app.configure_sets(
                 TectonicStep,
@@ -235,6 +269,96 @@ phenomenon_plugin!(
     diagnostics::update_diagnostics.in_set(TectonicSystems::Diagnostics)
 );
 
+/// Subduction (phenomenon `subduction`): fronts found at each resampling; every step, uplift
+/// of the overriding plates (Andean orogeny, island arcs), fold directions and trenches.
+#[derive(Default)]
+pub struct SubductionPlugin;
+
+impl Plugin for SubductionPlugin {
+    fn build(&self, app: &mut App) {
+        app.register_phenomenon(
+            "subduction",
+            TectonicSystems::Subduction,
+            "uplift and trenches at converging boundaries",
+        );
+        app.add_systems(
+            AfterResample,
+            convergence::build_fronts
+                .in_set(AfterResampleSystems::Fronts)
+                .run_if(phenomenon_enabled("subduction")),
+        );
+        app.add_systems(
+            TectonicStep,
+            (convergence::track_fronts, convergence::subduction_uplift)
+                .chain()
+                .in_set(TectonicSystems::Subduction)
+                .run_if(phenomenon_enabled("subduction")),
+        );
+    }
+}
+
+phenomenon_plugin!(
+    /// Slab pull (phenomenon `slab_pull`): subducting plates turn toward their fronts.
+    SlabPullPlugin, "slab_pull", TectonicSystems::SlabPull, "subducting plates turn toward their fronts",
+    convergence::slab_pull.in_set(TectonicSystems::SlabPull)
+);
+
+/// Terranes (phenomenon `terranes`): connected continental regions of each plate, as entities,
+/// rebuilt at each resampling.
+#[derive(Default)]
+pub struct TerranePlugin;
+
+impl Plugin for TerranePlugin {
+    fn build(&self, app: &mut App) {
+        app.register_phenomenon(
+            "terranes",
+            TectonicSystems::Resample,
+            "continental regions of each plate, as entities",
+        );
+        app.add_systems(
+            AfterResample,
+            convergence::build_terranes
+                .in_set(AfterResampleSystems::Terranes)
+                .run_if(phenomenon_enabled("terranes")),
+        );
+    }
+}
+
+/// Continental collisions (phenomenon `collision`): a terrane more than the interpenetration
+/// threshold under another plate's continent sutures to it, with a Himalayan surge around it.
+#[derive(Default)]
+pub struct CollisionPlugin;
+
+impl Plugin for CollisionPlugin {
+    fn build(&self, app: &mut App) {
+        app.register_phenomenon(
+            "collision",
+            TectonicSystems::Collision,
+            "continental collisions: terranes suture, Himalayan uplift",
+        );
+        app.add_systems(
+            TectonicStep,
+            (
+                convergence::detect_collisions
+                    .in_set(TectonicSystems::Collision)
+                    .run_if(phenomenon_enabled("collision")),
+                convergence::collide_before_resample
+                    .in_set(ResampleSystems::Interpolate)
+                    .before(resample::resample_interpolate)
+                    .run_if(phenomenon_enabled("collision"))
+                    .run_if(phenomenon_enabled("resample"))
+                    .run_if(resample::resample_due),
+            ),
+        );
+        app.add_systems(
+            AfterResample,
+            convergence::collision_uplift
+                .in_set(AfterResampleSystems::Collision)
+                .run_if(phenomenon_enabled("collision")),
+        );
+    }
+}
+
 /// Global resampling every 10–60 steps (adaptive) or on request (phenomenon `resample`).
 #[derive(Default)]
 pub struct ResamplePlugin;
@@ -266,10 +390,14 @@ pub struct TectonicPlugins;
 impl PluginGroup for TectonicPlugins {
     fn build(self) -> PluginGroupBuilder {
         PluginGroupBuilder::start::<Self>()
+            .add(CollisionPlugin)
             .add(DriftPlugin)
+            .add(SubductionPlugin)
             .add(ErosionPlugin)
+            .add(SlabPullPlugin)
             .add(AgingPlugin)
             .add(ResamplePlugin)
+            .add(TerranePlugin)
             .add(OceanicCrustPlugin)
             .add(DiagnosticsPlugin)
     }

@@ -1,11 +1,15 @@
 //! Resources of the simulation world: the crust fields, the clock, the plate lookup table used
 //! by per-sample kernels, the phenomenon registry (run-time switches) and step timings.
 
+pub mod convergence;
 pub mod crust;
 pub mod phenomena;
 pub mod plate_table;
 pub mod timings;
 
+pub use convergence::{
+    ConvergenceField, FrontPoints, OverridePairs, Suture, Sutures, TerraneField,
+};
 pub use crust::{Crust, CrustType, NO_PLATE, NonFinite, Orogeny};
 pub use phenomena::{Phenomena, PhenomenonInfo, phenomenon_enabled};
 pub use plate_table::{PlateState, PlateTable};

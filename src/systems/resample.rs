@@ -28,12 +28,18 @@ use crate::io::params::Params;
 use crate::resources::{
     Crust, CrustType, NO_PLATE, NextPlateId, PlateTable, ResampleRequest, SimClock, StepTimings,
 };
+use crate::resources::{OverridePairs, Sutures, TerraneField};
 
 /// Where one output sample takes its data from.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SampleSource {
     /// Slot (in the plate table) of the covering plate, `u32::MAX` for a gap.
     pub slot: u32,
+    /// The plate the sample belongs to after the resampling: the covering plate, or the plate a
+    /// colliding terrane sutures to.
+    pub plate: u32,
+    /// Index of the pending suture that moved this sample, `u32::MAX` if none.
+    pub suture: u32,
     /// Triangle of the reference mesh, in the plate frame.
     pub triangle: u32,
     /// Barycentric weights in that triangle (f32 is plenty for interpolating f32 fields, and a
@@ -44,6 +50,8 @@ pub struct SampleSource {
 impl SampleSource {
     const GAP: SampleSource = SampleSource {
         slot: u32::MAX,
+        plate: NO_PLATE,
+        suture: u32::MAX,
         triangle: 0,
         weights: [0.0; 3],
     };
@@ -154,19 +162,27 @@ impl CellPlates {
     }
 }
 
+/// What decides between two plates that both cover a sample from their core (an overlap).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct OverlapRules<'a> {
+    /// (overriding, subducting) plate pairs of the subduction fronts, sorted.
+    pub pairs: &'a [(u32, u32)],
+    /// Per reference sample of the old crust: the index of the pending suture that moves it
+    /// (`u32::MAX` if none).
+    pub suture_of_sample: &'a [u32],
+    /// Target plate of each pending suture.
+    pub suture_target: &'a [u32],
+}
+
 /// Finds, for every reference sample, the plate that covers it and where (see module docs).
 pub fn locate_sources(
     mesh: &SphereMesh,
     old: &Crust,
     table: &PlateTable,
+    rules: &OverlapRules,
     sources: &mut Vec<SampleSource>,
 ) {
-    let t = Instant::now();
     let cell_plates = CellPlates::build(mesh, old, table);
-    tracing::debug!(
-        ms = t.elapsed().as_secs_f64() * 1e3,
-        "resample: cell plates"
-    );
     sources.clear();
     sources.resize(mesh.len(), SampleSource::GAP);
     sources
@@ -174,20 +190,35 @@ pub fn locate_sources(
         .enumerate()
         .with_min_len(1024)
         .for_each(|(j, src)| {
-            *src = locate_one(mesh, old, table, &cell_plates, mesh.positions[j]);
+            *src = locate_one(mesh, old, table, &cell_plates, rules, mesh.positions[j]);
         });
 }
 
+/// A plate covering a point from its core.
+#[derive(Clone, Copy)]
+struct CoreHit {
+    source: SampleSource,
+    sutured: bool,
+    continental: bool,
+}
+
 /// The covering plate of world point `q` (see module docs); `SampleSource::GAP` if none.
+///
+/// Between plates covering the point from their core, in this order: crust of a terrane that
+/// sutures in this resampling stays on top (and joins its new plate); continental crust stays
+/// on top of oceanic crust (it does not subduct); the overriding plate of a subduction front
+/// stays on top of the subducting one; otherwise the plate order (overlap score) decides.
 #[inline]
 pub fn locate_one(
     mesh: &SphereMesh,
     old: &Crust,
     table: &PlateTable,
     cells: &CellPlates,
+    rules: &OverlapRules,
     q: DVec3,
 ) -> SampleSource {
     let mut fallback = SampleSource::GAP;
+    let mut best: Option<CoreHit> = None;
     let locator = mesh.locator();
     for &slot in &table.by_rank {
         let p = &table.plates[slot as usize];
@@ -209,19 +240,51 @@ pub fn locate_one(
         if !owners.contains(&p.id) {
             continue;
         }
-        let found = SampleSource {
+        let mut found = SampleSource {
             slot,
+            plate: p.id,
+            suture: u32::MAX,
             triangle: loc.triangle,
             weights: loc.weights.map(|w| w as f32),
         };
-        if owners[loc.dominant_corner()] == p.id {
-            return found;
+        let corner = loc.dominant_corner();
+        if owners[corner] != p.id {
+            if fallback.is_gap() {
+                fallback = found;
+            }
+            continue;
         }
-        if fallback.is_gap() {
-            fallback = found;
+        let d = tri[corner] as usize;
+        let suture = rules.suture_of_sample.get(d).copied().unwrap_or(u32::MAX);
+        let sutured = suture != u32::MAX;
+        if sutured {
+            found.suture = suture;
+            found.plate = rules.suture_target[suture as usize];
         }
+        let continental: f64 = (0..3)
+            .filter(|&k| old.crust_type[tri[k] as usize] == CrustType::Continental)
+            .map(|k| loc.weights[k])
+            .sum();
+        let hit = CoreHit {
+            source: found,
+            sutured,
+            continental: continental >= 0.5,
+        };
+        best = Some(match best {
+            None => hit,
+            Some(b) => {
+                let key = |h: &CoreHit| (h.sutured, h.continental);
+                let beats = key(&hit) > key(&b)
+                    || (key(&hit) == key(&b)
+                        && rules
+                            .pairs
+                            .binary_search(&(hit.source.plate, b.source.plate))
+                            .is_ok());
+                if beats { hit } else { b }
+            }
+        });
     }
-    fallback
+    best.map_or(fallback, |b| b.source)
 }
 
 #[inline]
@@ -326,7 +389,7 @@ pub fn interpolate(
             *og = old.orogeny[d];
             *oga = lerp(&old.orogeny_age_my);
             *fd = dir(&old.fold_dir);
-            *pl = plate_state.id;
+            *pl = src.plate;
         });
 }
 
@@ -630,24 +693,64 @@ pub fn resample_due(
 /// First system of a resampling: locates every sample in the moved plates, interpolates, finds
 /// the gaps and their nearest plates, and fills gaps with the nearest plate's data (gap-filler
 /// plugins overwrite that next).
+#[allow(clippy::too_many_arguments)]
 pub fn resample_interpolate(
     mesh: Res<SphereMesh>,
     crust: Res<Crust>,
     clock: Res<SimClock>,
     params: Res<Params>,
     plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
+    pairs: Option<Res<OverridePairs>>,
+    terranes: Option<Res<TerraneField>>,
+    mut sutures: Option<ResMut<Sutures>>,
     mut work: ResMut<ResampleWork>,
 ) {
     let started = Instant::now();
     let table = PlateTable::from_query(&plates);
     let work = &mut *work;
+    // Pending sutures: which old samples move to which plate.
+    let pending: Vec<crate::resources::Suture> = sutures
+        .as_mut()
+        .map(|s| std::mem::take(&mut s.pending))
+        .unwrap_or_default();
+    let mut suture_of_sample = Vec::new();
+    if let Some(t) = terranes
+        .as_ref()
+        .filter(|t| t.terrane.len() == crust.len() && !pending.is_empty())
+    {
+        suture_of_sample = vec![u32::MAX; crust.len()];
+        for (i, &ter) in t.terrane.iter().enumerate() {
+            if let Some(k) = pending
+                .iter()
+                .position(|s| s.terrane == ter && crust.plate[i] == s.from_plate)
+            {
+                suture_of_sample[i] = k as u32;
+            }
+        }
+    }
+    let suture_target: Vec<u32> = pending.iter().map(|s| s.to_plate).collect();
+    let rules = OverlapRules {
+        pairs: pairs.as_ref().map_or(&[][..], |p| &p.0[..]),
+        suture_of_sample: &suture_of_sample,
+        suture_target: &suture_target,
+    };
     let lap = |name: &str, t: &mut Instant| {
         tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "resample: {name}");
         *t = Instant::now();
     };
     let mut t = Instant::now();
-    locate_sources(&mesh, &crust, &table, &mut work.sources);
+    locate_sources(&mesh, &crust, &table, &rules, &mut work.sources);
     lap("locate", &mut t);
+    if let Some(s) = sutures.as_mut() {
+        let mut moved: Vec<Vec<u32>> = vec![Vec::new(); pending.len()];
+        for (j, src) in work.sources.iter().enumerate() {
+            if src.suture != u32::MAX {
+                moved[src.suture as usize].push(j as u32);
+            }
+        }
+        s.total += pending.len() as u64;
+        s.applied = pending.into_iter().zip(moved).collect();
+    }
     interpolate(&mesh, &crust, &table, &work.sources, &mut work.next);
     lap("interpolate", &mut t);
     let gap_ids: Vec<u32> = work
@@ -706,6 +809,7 @@ pub fn resample_rebuild(world: &mut World) {
         clock.resamplings += 1;
     }
     world.resource_mut::<ResampleRequest>().0 = false;
+    let _ = world.try_run_schedule(crate::plugins::AfterResample);
     if let Some(t0) = started {
         world
             .resource_mut::<StepTimings>()

@@ -1,0 +1,118 @@
+//! Per-sample and per-front-point state of the convergent boundaries: where the subduction fronts
+//! are, how far each sample is from the nearest one, which terrane each continental sample
+//! belongs to, and the collisions waiting for the next resampling.
+
+use bevy_ecs::prelude::*;
+use glam::DVec3;
+
+/// Sentinel for "none" in the per-sample index fields.
+pub const NONE: u32 = u32::MAX;
+
+/// The points of every subduction front, found at the last resampling (structure of arrays).
+/// Static fields describe the front in the overriding plate's frame; dynamic fields are
+/// refreshed every step by the subduction system.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct FrontPoints {
+    /// Overriding-side reference sample of each point (its position is the point, in the
+    /// overriding plate's frame).
+    pub sample: Vec<u32>,
+    /// Overriding plate id.
+    pub overriding: Vec<u32>,
+    /// Subducting plate id.
+    pub subducting: Vec<u32>,
+    /// Unit tangent from the overriding toward the subducting plate, overriding frame.
+    pub normal: Vec<DVec3>,
+    /// Length of front each point stands for, km.
+    pub length_km: Vec<f32>,
+    /// Whether subducting crust is under the point now (dynamic).
+    pub active: Vec<bool>,
+    /// Elevation of the subducting crust at the point now, km (dynamic).
+    pub subducting_elevation_km: Vec<f32>,
+    /// Subducting minus overriding surface velocity at the point, in the overriding plate's
+    /// frame, km/My (dynamic).
+    pub relative_velocity: Vec<DVec3>,
+    /// Convergence accumulated since the last resampling, km (dynamic).
+    pub converged_km: Vec<f32>,
+}
+
+impl FrontPoints {
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.sample.len()
+    }
+    /// True when there is no front.
+    pub fn is_empty(&self) -> bool {
+        self.sample.is_empty()
+    }
+    /// Removes every point.
+    pub fn clear(&mut self) {
+        *self = Self::default();
+    }
+}
+
+/// Distance of every sample to the nearest subduction front, measured in its own plate at the
+/// last resampling, on the overriding side and on the subducting side (a plate can be both, at
+/// different fronts).
+#[derive(Resource, Clone, Debug, Default)]
+pub struct ConvergenceField {
+    /// Distance to the nearest front this sample's plate overrides, km (infinite if none).
+    pub overriding_distance_km: Vec<f32>,
+    /// That front point ([`NONE`] if none).
+    pub overriding_point: Vec<u32>,
+    /// Distance to the nearest front this sample's plate subducts at, km (infinite if none).
+    pub subducting_distance_km: Vec<f32>,
+    /// That front point ([`NONE`] if none).
+    pub subducting_point: Vec<u32>,
+}
+
+/// Which plate overrides which, per converging pair (from the fronts), for resolving overlaps.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct OverridePairs(pub Vec<(u32, u32)>);
+
+impl OverridePairs {
+    /// True when plate `a` overrides plate `b` at some front.
+    pub fn overrides(&self, a: u32, b: u32) -> bool {
+        self.0.binary_search(&(a, b)).is_ok()
+    }
+}
+
+/// The terrane of every sample ([`NONE`] for oceanic crust), rebuilt at each resampling, and the
+/// terranes' areas.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct TerraneField {
+    /// Terrane index per sample.
+    pub terrane: Vec<u32>,
+    /// Area per terrane, km².
+    pub area_km2: Vec<f64>,
+    /// Plate id per terrane.
+    pub plate: Vec<u32>,
+}
+
+/// A collision decided this step: a terrane leaves its plate for another at the next resampling.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Suture {
+    /// The terrane that moves.
+    pub terrane: u32,
+    /// The plate it leaves.
+    pub from_plate: u32,
+    /// The plate it joins.
+    pub to_plate: u32,
+    /// Its area, km².
+    pub area_km2: f64,
+    /// Relative speed of the two plates at its centroid, km/My.
+    pub relative_speed_km_per_my: f64,
+    /// Its centroid, world frame.
+    pub centroid_world: DVec3,
+}
+
+/// Collisions waiting for the resampling of this step, and the ones it applied (for the
+/// collision uplift that follows it).
+#[derive(Resource, Clone, Debug, Default)]
+pub struct Sutures {
+    /// Decided, not yet applied.
+    pub pending: Vec<Suture>,
+    /// Applied by the last resampling: (suture, samples now in the joined plate).
+    pub applied: Vec<(Suture, Vec<u32>)>,
+    /// Every collision so far.
+    pub total: u64,
+}

@@ -475,7 +475,9 @@ define_params! {
         distance_km: f64 = 4200.0, 10.0..=20000.0, "km", "Maximum collision influence distance r_c.";
         coefficient_per_km: f64 = 1.3e-5, 0.0..=1.0, "1/km", "Discrete collision coefficient Δ_c.";
         interpenetration_km: f64 = 300.0, 0.0..=5000.0, "km", "Interpenetration of continental crust that triggers a collision.";
-        max_uplift_km: f64 = 4.0, 0.0..=30.0, "km", "Saturation of the collision surge: Δz = H·(1 − exp(−Δ_c·A/H)), Δ_c·A for small terranes, at most H for continents.";
+        trapped_ocean_km2: f64 = 50000.0, 0.0..=1e8, "km²", "A patch of oceanic crust smaller than this, enclosed by the continental crust of one plate (an ocean closed by a collision), is welded into the continent at the next resampling.";
+        min_terrane_km2: f64 = 100000.0, 0.0..=1e9, "km²", "Terranes smaller than this do not collide: they are forced under the other plate (paper §4.1) and counted as subducted continental crust.";
+        max_uplift_km: f64 = 1.0, 0.0..=30.0, "km", "Saturation of the collision surge: Δz = H·(1 − exp(−Δ_c·A/H)), Δ_c·A for small terranes, at most H for continents.";
     }
     /// Plate rifting.
     [rifting] Rifting {

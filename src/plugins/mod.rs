@@ -317,7 +317,11 @@ impl Plugin for TerranePlugin {
         );
         app.add_systems(
             AfterResample,
-            convergence::build_terranes
+            (
+                convergence::close_trapped_ocean,
+                convergence::build_terranes,
+            )
+                .chain()
                 .in_set(AfterResampleSystems::Terranes)
                 .run_if(phenomenon_enabled("terranes")),
         );

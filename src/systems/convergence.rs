@@ -385,6 +385,86 @@ pub fn build_fronts(world: &mut World) {
     }
 }
 
+/// Welds into the continent every small patch of oceanic crust (smaller than
+/// `collision.trapped_ocean_km2`) that the continental crust of a single plate encloses: the
+/// remnants of an ocean closed by a collision. Its elevation is taken from the surrounding
+/// continent, from the shore inward. Without this, such slivers stay as pits kilometres deep in
+/// the middle of mountain belts.
+pub fn close_trapped_ocean(world: &mut World) {
+    let limit = world.resource::<Params>().collision.trapped_ocean_km2;
+    if limit <= 0.0 {
+        return;
+    }
+    let mut crust = world.remove_resource::<Crust>().unwrap_or_default();
+    let mesh = world.resource::<SphereMesh>();
+    let n = mesh.len();
+    let mut seen = vec![false; n];
+    let mut comp = Vec::new();
+    for s in 0..n {
+        if seen[s] || crust.crust_type[s] != CrustType::Oceanic {
+            continue;
+        }
+        comp.clear();
+        comp.push(s);
+        seen[s] = true;
+        let (mut area, mut enclosed, mut k) = (0.0, true, 0);
+        let plate = crust.plate[s];
+        while k < comp.len() {
+            let u = comp[k];
+            k += 1;
+            area += mesh.area_km2[u];
+            for &v in mesh.neighbors_of(u) {
+                let v = v as usize;
+                if crust.crust_type[v] == CrustType::Oceanic {
+                    if !seen[v] {
+                        seen[v] = true;
+                        comp.push(v);
+                    }
+                } else if crust.plate[v] != plate {
+                    enclosed = false;
+                }
+            }
+            if area >= limit {
+                enclosed = false;
+            }
+        }
+        if !enclosed || area >= limit || comp.iter().any(|&u| crust.plate[u] != plate) {
+            continue;
+        }
+        // Fill from the shore inward with the mean elevation of continental neighbours.
+        let mut remaining: Vec<usize> = comp.clone();
+        while !remaining.is_empty() {
+            let mut next = Vec::new();
+            let mut filled = Vec::new();
+            for &u in &remaining {
+                let (mut sum, mut cnt) = (0.0f64, 0u32);
+                for &v in mesh.neighbors_of(u) {
+                    if crust.crust_type[v as usize] == CrustType::Continental {
+                        sum += crust.elevation_km[v as usize] as f64;
+                        cnt += 1;
+                    }
+                }
+                if cnt > 0 {
+                    filled.push((u, (sum / cnt as f64) as f32));
+                } else {
+                    next.push(u);
+                }
+            }
+            if filled.is_empty() {
+                break;
+            }
+            for (u, z) in filled {
+                crust.elevation_km[u] = z;
+                crust.crust_type[u] = CrustType::Continental;
+                crust.thickness_km[u] =
+                    world.resource::<Params>().init.continental_thickness_km as f32;
+            }
+            remaining = next;
+        }
+    }
+    world.insert_resource(crust);
+}
+
 /// Rebuilds the terranes: connected continental regions within each plate, as entities and as
 /// the per-sample [`TerraneField`].
 pub fn build_terranes(world: &mut World) {
@@ -512,6 +592,7 @@ pub fn subduction_uplift(
     );
     let beta = s.fold_weight;
     let (wt, rate) = (s.trench_width_km, s.trench_rate);
+    let z_r = params.ocean.ridge_elevation_km;
     let crust = &mut *crust;
     (
         crust.elevation_km.par_iter_mut(),
@@ -532,7 +613,11 @@ pub fn subduction_uplift(
                 let rel = fp.relative_velocity[k];
                 let zs = fp.subducting_elevation_km[k] as f64;
                 let zn = ((zs - z_t) / (z_c - z_t)).clamp(0.0, 1.0);
-                let u = u0 * distance_transfer(od as f64, rc, rs) * (rel.length() / v0) * zn * zn;
+                let u = u0
+                    * distance_transfer(od as f64, rc, rs)
+                    * (rel.length() / v0).min(1.0)
+                    * zn
+                    * zn;
                 if u > 0.0 {
                     let znew = (*z as f64 + u * dt).min(z_c);
                     *z = znew as f32;
@@ -546,7 +631,12 @@ pub fn subduction_uplift(
                     fold[2] += f.z as f32;
                 }
             }
-            if sp != NONE && *ct == CrustType::Oceanic && fp.active[sp as usize] {
+            // Only ocean floor makes a trench (not oceanic specks stranded among continents).
+            if sp != NONE
+                && *ct == CrustType::Oceanic
+                && (*z as f64) < z_r
+                && fp.active[sp as usize]
+            {
                 let d = sd as f64 - fp.converged_km[sp as usize] as f64;
                 if (0.0..wt).contains(&d) {
                     let target = z_t + (z_a - z_t) * (d / wt);
@@ -645,6 +735,12 @@ pub fn find_collisions(
             }
             let (tb, ta) = (terranes.terrane[i], terranes.terrane[os]);
             if tb == NONE || ta == NONE {
+                return None;
+            }
+            let min_area = params.collision.min_terrane_km2;
+            if terranes.area_km2[tb as usize] < min_area
+                || terranes.area_km2[ta as usize] < min_area
+            {
                 return None;
             }
             Some((tb, ta, fp.subducting[k], fp.overriding[k]))
@@ -802,7 +898,7 @@ pub fn collision_uplift(world: &mut World) {
                 0.0
             };
             let dz = peak * (1.0 - d * d).max(0.0).powi(2);
-            if dz <= 0.0 {
+            if dz <= 0.0 || crust.crust_type[i] != CrustType::Continental {
                 continue;
             }
             crust.elevation_km[i] = (crust.elevation_km[i] as f64 + dz).min(z_c) as f32;

@@ -40,6 +40,8 @@ pub struct SampleSource {
     pub plate: u32,
     /// Index of the pending suture that moved this sample, `u32::MAX` if none.
     pub suture: u32,
+    /// True when another plate's continental crust covered this sample too and went under.
+    pub continental_lost: bool,
     /// Triangle of the reference mesh, in the plate frame.
     pub triangle: u32,
     /// Barycentric weights in that triangle (f32 is plenty for interpolating f32 fields, and a
@@ -52,6 +54,7 @@ impl SampleSource {
         slot: u32::MAX,
         plate: NO_PLATE,
         suture: u32::MAX,
+        continental_lost: false,
         triangle: 0,
         weights: [0.0; 3],
     };
@@ -97,6 +100,9 @@ pub struct ResampleWork {
     pub elapsed_my: f64,
     /// Per-sample sources of this resampling.
     pub sources: Vec<SampleSource>,
+    /// Continental crust that went under another plate's continental crust in this
+    /// resampling (forced subduction of small terranes), km².
+    pub continental_subducted_km2: f64,
     started: Option<Instant>,
 }
 
@@ -244,6 +250,7 @@ pub fn locate_one(
             slot,
             plate: p.id,
             suture: u32::MAX,
+            continental_lost: false,
             triangle: loc.triangle,
             weights: loc.weights.map(|w| w as f32),
         };
@@ -280,7 +287,9 @@ pub fn locate_one(
                             .pairs
                             .binary_search(&(hit.source.plate, b.source.plate))
                             .is_ok());
-                if beats { hit } else { b }
+                let (mut win, lose) = if beats { (hit, b) } else { (b, hit) };
+                win.source.continental_lost |= lose.continental && !lose.sutured;
+                win
             }
         });
     }
@@ -352,7 +361,36 @@ pub fn interpolate(
             }
             let t = mesh.triangles[src.triangle as usize];
             let v = [t[0] as usize, t[1] as usize, t[2] as usize];
-            let w = src.weights.map(|w| w as f64);
+            let w_all = src.weights.map(|w| w as f64);
+            // Crust type by weighted vote (the 0.5 level of the interpolated indicator): smoother
+            // coastlines than the nearest vertex, which roughens them at every resampling.
+            let cont: f64 = (0..3)
+                .filter(|&k| old.crust_type[v[k]] == CrustType::Continental)
+                .map(|k| w_all[k])
+                .sum();
+            let out_type = if cont >= 0.5 {
+                CrustType::Continental
+            } else {
+                CrustType::Oceanic
+            };
+            // Scalars are interpolated over the vertices of the sample's own crust type only, so
+            // a coast never mixes trench depths into continents or mountains into the ocean.
+            let same = if out_type == CrustType::Continental {
+                cont
+            } else {
+                1.0 - cont
+            };
+            let w = if same > 0.0 {
+                let mut m = [0.0; 3];
+                for k in 0..3 {
+                    if old.crust_type[v[k]] == out_type {
+                        m[k] = w_all[k] / same;
+                    }
+                }
+                m
+            } else {
+                w_all
+            };
             let lerp = |f: &[f32]| {
                 (w[0] * f[v[0]] as f64 + w[1] * f[v[1]] as f64 + w[2] * f[v[2]] as f64) as f32
             };
@@ -373,17 +411,7 @@ pub fn interpolate(
             let d = v[dominant(&w)];
             *z = lerp(&old.elevation_km);
             *e = lerp(&old.thickness_km);
-            // Crust type by weighted vote (the 0.5 level of the interpolated indicator): smoother
-            // coastlines than the nearest vertex, which roughens them at every resampling.
-            let cont: f64 = (0..3)
-                .filter(|&k| old.crust_type[v[k]] == CrustType::Continental)
-                .map(|k| w[k])
-                .sum();
-            *ct = if cont >= 0.5 {
-                CrustType::Continental
-            } else {
-                CrustType::Oceanic
-            };
+            *ct = out_type;
             *age = lerp(&old.age_my);
             *rd = dir(&old.ridge_dir);
             *og = old.orogeny[d];
@@ -741,6 +769,17 @@ pub fn resample_interpolate(
     let mut t = Instant::now();
     locate_sources(&mesh, &crust, &table, &rules, &mut work.sources);
     lap("locate", &mut t);
+    let lost: f64 = work
+        .sources
+        .iter()
+        .zip(&mesh.area_km2)
+        .filter(|(s, _)| s.continental_lost)
+        .map(|(_, a)| *a)
+        .sum();
+    work.continental_subducted_km2 = lost;
+    if lost > 0.0 {
+        tracing::debug!(km2 = lost, "continental crust forced under another plate");
+    }
     if let Some(s) = sutures.as_mut() {
         let mut moved: Vec<Vec<u32>> = vec![Vec::new(); pending.len()];
         for (j, src) in work.sources.iter().enumerate() {

@@ -371,6 +371,14 @@ impl Simulation {
                 }
             }
         }
+        let mut next_id = world.resource::<NextPlateId>().0;
+        resample::defragment_plates(
+            mesh,
+            &mut next.plate,
+            params.resample.fragment_min_area_km2,
+            true,
+            &mut next_id,
+        );
         next
     }
 

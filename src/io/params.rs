@@ -467,7 +467,7 @@ define_params! {
         fold_weight: f64 = 0.1, 0.0..=10.0, "", "β: weight of the relative plate velocity in the fold direction update.";
         slab_pull_perturbation: f64 = 1.0, 0.0..=100.0, "", "Slab pull ε: the Euler pole of a subducting plate turns by 0.01·ε rad/My per radian of subduction front (normalised by front length, so independent of the sample count).";
         trench_width_km: f64 = 200.0, 1.0..=2000.0, "km", "Width of the trench on the subducting plate in front of a subduction front.";
-        trench_rate: f64 = 0.3, 0.0..=1.0, "fraction per step", "Fraction of the gap to the trench profile (z_t at the front, z_a at the trench edge) closed each step.";
+        trench_rate: f64 = 1.0, 0.0..=1.0, "fraction per step", "Fraction of the gap to the trench profile (z_t at the front, z_a at the trench edge) closed each step (1: the plate bends down at once as it reaches the trench).";
         min_convergence_mm_per_yr: f64 = 5.0, 0.0..=1000.0, "mm/yr", "Plate boundaries converging slower than this make no subduction front.";
     }
     /// Continental collision.

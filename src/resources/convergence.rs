@@ -33,6 +33,8 @@ pub struct FrontPoints {
     pub relative_velocity: Vec<DVec3>,
     /// Convergence accumulated since the last resampling, km (dynamic).
     pub converged_km: Vec<f32>,
+    /// Convergence rate at the last step, km/My (dynamic).
+    pub convergence_km_per_my: Vec<f32>,
 }
 
 impl FrontPoints {

@@ -20,7 +20,8 @@
 //!   since the trench is made on the subducting side), g = v/v0 and h = z̃², z̃ the normalised
 //!   elevation of the subducting crust now at the front point (located in the subducting plate
 //!   every step). Elevations are capped at z_c. Uplifted crust above sea level gets Andean
-//!   orogeny with its age reset; fold directions take β·(s_sub − s_over)·δt.
+//!   orogeny with its age reset, and emerged oceanic crust (an island arc) becomes continental
+//!   crust, the way continents grow at arcs; fold directions take β·(s_sub − s_over)·δt.
 //! - **Trench**: oceanic crust of the subducting plate within `subduction.trench_width_km` of the
 //!   front deepens toward a profile from z_t at the front to z_a at the trench edge.
 //! - **Slab pull**: w ← normalise(w + 0.01·ε·Σ_k (c × q_k)/|c × q_k|·(ℓ_k/R)·δt) over the active
@@ -312,6 +313,7 @@ pub fn build_fronts(world: &mut World) {
     fp.subducting_elevation_km = vec![0.0; m];
     fp.relative_velocity = vec![DVec3::ZERO; m];
     fp.converged_km = vec![0.0; m];
+    fp.convergence_km_per_my = vec![0.0; m];
     pairs.sort_unstable();
     pairs.dedup();
 
@@ -558,6 +560,8 @@ pub fn track_fronts(
                 sub.motion.velocity_km_per_my(w, r_km) - over.motion.velocity_km_per_my(w, r_km);
             let n_world = over.world_from_plate * fp.normal[k];
             let conv = (-rel_world.dot(n_world)) as f32;
+            // A front acts only while subducting crust is under it and the plates still converge.
+            let active = active && conv as f64 > params.subduction.min_convergence_mm_per_yr;
             (active, z, over.plate_from_world * rel_world, conv)
         })
         .collect();
@@ -566,6 +570,7 @@ pub fn track_fronts(
         fp.subducting_elevation_km[k] = z;
         fp.relative_velocity[k] = rel;
         fp.converged_km[k] += conv * dt;
+        fp.convergence_km_per_my[k] = conv;
     }
 }
 
@@ -599,7 +604,7 @@ pub fn subduction_uplift(
         crust.orogeny.par_iter_mut(),
         crust.orogeny_age_my.par_iter_mut(),
         crust.fold_dir.par_iter_mut(),
-        crust.crust_type.par_iter(),
+        crust.crust_type.par_iter_mut(),
         field.overriding_distance_km.par_iter(),
         field.overriding_point.par_iter(),
         field.subducting_distance_km.par_iter(),
@@ -624,6 +629,9 @@ pub fn subduction_uplift(
                     if znew > 0.0 && u * dt > 1e-4 {
                         *og = Orogeny::Andean;
                         *oga = 0.0;
+                        // An island arc that emerges is new continental crust: it will resist
+                        // subduction and accrete as a terrane (paper Fig. 15).
+                        *ct = CrustType::Continental;
                     }
                     let f = rel * (beta * dt);
                     fold[0] += f.x as f32;
@@ -699,8 +707,10 @@ pub fn slab_pull(
 /// Finds terranes colliding now: continental crust of a subducting plate more than
 /// `threshold_km` past a front whose overriding crust is continental too. Queues a suture for
 /// the smaller terrane of each pair in contact and asks for a resampling.
+#[allow(clippy::too_many_arguments)]
 pub fn find_collisions(
     threshold_km: f64,
+    lookahead_my: f64,
     mesh: &SphereMesh,
     params: &Params,
     crust: &Crust,
@@ -725,7 +735,12 @@ pub fn find_collisions(
                 return None;
             }
             let k = k as usize;
-            let d = field.subducting_distance_km[i] as f64 - fp.converged_km[k] as f64;
+            // Where the crust will be after `lookahead_my` more of convergence (the collision
+            // check at the start of a step looks one step ahead, as Driftworld does, so that the
+            // overlap at the resampling that follows is about the threshold, not a step more).
+            let d = field.subducting_distance_km[i] as f64
+                - fp.converged_km[k] as f64
+                - fp.convergence_km_per_my[k].max(0.0) as f64 * lookahead_my;
             if d >= -threshold_km || (threshold_km <= 0.0 && d >= 0.0) {
                 return None;
             }
@@ -804,6 +819,7 @@ pub fn detect_collisions(
     let t = params.collision.interpenetration_km;
     if find_collisions(
         t,
+        params.time.time_step_my,
         &mesh,
         &params,
         &crust,
@@ -832,6 +848,7 @@ pub fn collide_before_resample(
 ) {
     let table = PlateTable::from_query(&plates);
     find_collisions(
+        0.0,
         0.0,
         &mesh,
         &params,

@@ -103,6 +103,8 @@ pub struct ResampleWork {
     /// Continental crust that went under another plate's continental crust in this
     /// resampling (forced subduction of small terranes), km².
     pub continental_subducted_km2: f64,
+    /// The same, summed over the whole run, km².
+    pub continental_subducted_total_km2: f64,
     started: Option<Instant>,
 }
 
@@ -223,7 +225,6 @@ pub fn locate_one(
     rules: &OverlapRules,
     q: DVec3,
 ) -> SampleSource {
-    let mut fallback = SampleSource::GAP;
     let mut best: Option<CoreHit> = None;
     let locator = mesh.locator();
     for &slot in &table.by_rank {
@@ -256,9 +257,10 @@ pub fn locate_one(
         };
         let corner = loc.dominant_corner();
         if owners[corner] != p.id {
-            if fallback.is_gap() {
-                fallback = found;
-            }
+            // Fringe only: the plate's half of a triangle it shares with a plate that moved
+            // differently. Extending the plate there would stretch it by a strip at every
+            // divergent margin (growing continents); the gap fillers make new crust instead.
+            // (Plates that move together still cover every point from a core.)
             continue;
         }
         let d = tri[corner] as usize;
@@ -293,7 +295,7 @@ pub fn locate_one(
             }
         });
     }
-    best.map_or(fallback, |b| b.source)
+    best.map_or(SampleSource::GAP, |b| b.source)
 }
 
 #[inline]
@@ -361,14 +363,33 @@ pub fn interpolate(
             }
             let t = mesh.triangles[src.triangle as usize];
             let v = [t[0] as usize, t[1] as usize, t[2] as usize];
-            let w_all = src.weights.map(|w| w as f64);
+            let plate_state = &table.plates[src.slot as usize];
+            // A vertex of another plate carries valid data here only if that plate moved exactly
+            // like the covering one (same frame); otherwise its crust would be copied to where it
+            // is not (smearing continental margins across divergent boundaries at every
+            // resampling), so only the covering plate's vertices and its co-moving neighbours'
+            // count.
+            let mut w_all = src.weights.map(|w| w as f64);
+            let valid = |k: usize| {
+                let p = old.plate[v[k]];
+                p == plate_state.id
+                    || table
+                        .get(p)
+                        .is_some_and(|o| o.world_from_plate == plate_state.world_from_plate)
+            };
+            let kept: f64 = (0..3).filter(|&k| valid(k)).map(|k| w_all[k]).sum();
+            if kept > 0.0 && kept < 1.0 {
+                for k in 0..3 {
+                    w_all[k] = if valid(k) { w_all[k] / kept } else { 0.0 };
+                }
+            }
             // Crust type by weighted vote (the 0.5 level of the interpolated indicator): smoother
             // coastlines than the nearest vertex, which roughens them at every resampling.
             let cont: f64 = (0..3)
                 .filter(|&k| old.crust_type[v[k]] == CrustType::Continental)
                 .map(|k| w_all[k])
                 .sum();
-            let out_type = if cont >= 0.5 {
+            let out_type = if cont > 0.5 {
                 CrustType::Continental
             } else {
                 CrustType::Oceanic
@@ -394,7 +415,6 @@ pub fn interpolate(
             let lerp = |f: &[f32]| {
                 (w[0] * f[v[0]] as f64 + w[1] * f[v[1]] as f64 + w[2] * f[v[2]] as f64) as f32
             };
-            let plate_state = &table.plates[src.slot as usize];
             let dir = |f: &[[f32; 3]]| -> [f32; 3] {
                 let mut acc = DVec3::ZERO;
                 for k in 0..3 {
@@ -777,6 +797,7 @@ pub fn resample_interpolate(
         .map(|(_, a)| *a)
         .sum();
     work.continental_subducted_km2 = lost;
+    work.continental_subducted_total_km2 += lost;
     if lost > 0.0 {
         tracing::debug!(km2 = lost, "continental crust forced under another plate");
     }

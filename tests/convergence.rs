@@ -1,0 +1,339 @@
+//! Scenario tests of convergent boundaries: subduction under a continent (trench and Andean
+//! range), ocean–ocean subduction (island arc on the younger plate), continental collision
+//! (terrane transfer, Himalayan uplift, area conserved), slab pull, and the default planet over
+//! a long run.
+
+mod common;
+
+use common::*;
+use glam::DVec3;
+use tectonic_planets::geometry::angle_between;
+use tectonic_planets::prelude::*;
+use tectonic_planets::resources::{FrontPoints, Sutures};
+
+const R: f64 = 6370.0;
+
+/// Two plates: 0 = northern hemisphere (at rest), 1 = southern hemisphere turning about `pole`
+/// at `speed` mm/yr, so that it pushes north into plate 0 around longitude 90°. `north` and
+/// `south` set each sample's crust (type, elevation km, age My).
+fn two_hemispheres(
+    samples: u64,
+    pole: DVec3,
+    speed_mm_per_yr: f64,
+    north: impl Fn(DVec3) -> (CrustType, f32, f32),
+    south: impl Fn(DVec3) -> (CrustType, f32, f32),
+) -> Simulation {
+    let mut p = params(samples, 3);
+    p.init.continental_fraction = 0.0;
+    p.resample.min_interval_steps = 10;
+    p.resample.max_interval_steps = 10;
+    let mut sim = Simulation::new(p).unwrap();
+    let mesh = sim.mesh().clone();
+    {
+        let mut crust = sim.world_mut().resource_mut::<Crust>();
+        for i in 0..mesh.len() {
+            let q = mesh.positions[i];
+            let (t, z, a) = if q.z >= 0.0 { north(q) } else { south(q) };
+            crust.crust_type[i] = t;
+            crust.elevation_km[i] = z;
+            crust.age_my[i] = a;
+            crust.thickness_km[i] = if t == CrustType::Continental {
+                35.0
+            } else {
+                7.0
+            };
+        }
+    }
+    let plates: Vec<u32> = mesh
+        .positions
+        .iter()
+        .map(|q| if q.z >= 0.0 { 0 } else { 1 })
+        .collect();
+    let rest = PlateMotion {
+        euler_pole: DVec3::Z,
+        angular_speed_rad_per_my: 0.0,
+    };
+    let moving = PlateMotion {
+        euler_pole: pole,
+        angular_speed_rad_per_my: speed_mm_per_yr / R,
+    };
+    sim.reassign_plates(plates, &[(0, rest), (1, moving)])
+        .unwrap();
+    sim
+}
+
+fn continent(z: f32) -> (CrustType, f32, f32) {
+    (CrustType::Continental, z, 1000.0)
+}
+fn ocean(z: f32, age: f32) -> (CrustType, f32, f32) {
+    (CrustType::Oceanic, z, age)
+}
+
+/// Samples near the meridian of longitude 90° (the plane x = 0, y > 0).
+fn meridian_90(mesh: &SphereMesh) -> Vec<usize> {
+    (0..mesh.len())
+        .filter(|&i| mesh.positions[i].x.abs() < 0.03 && mesh.positions[i].y > 0.0)
+        .collect()
+}
+
+#[test]
+fn ocean_under_continent_makes_a_trench_and_an_andean_range() {
+    let mut sim = two_hemispheres(
+        80_000,
+        DVec3::X,
+        80.0,
+        |_| continent(0.3),
+        |_| ocean(-4.5, 100.0),
+    );
+    {
+        let mut q = sim.world_mut().query::<&SubductionFront>();
+        let fronts: Vec<SubductionFront> = q.iter(sim.world()).cloned().collect();
+        assert!(!fronts.is_empty(), "no subduction front found");
+        for f in &fronts {
+            assert_eq!(
+                (f.overriding.0, f.subducting.0, f.kind),
+                (0, 1, FrontKind::OceanUnderContinent)
+            );
+        }
+    }
+    sim.run_steps(25).unwrap();
+    let crust = sim.resampled_crust();
+    let mesh = sim.mesh().clone();
+    let line = meridian_90(&mesh);
+    // Andean range: the highest continental sample along the meridian, within r_s of the
+    // front (the equator), near the control distance.
+    let (crest, crest_z) = line
+        .iter()
+        .filter(|&&i| crust.plate[i] == 0)
+        .map(|&i| (i, crust.elevation_km[i]))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap();
+    let crest_km = mesh.positions[crest].z.asin() * R;
+    assert!(crest_z > 0.8, "the range only reaches {crest_z} km");
+    assert!(
+        (300.0..1000.0).contains(&crest_km),
+        "crest {crest_km:.0} km from the front (control distance 637 km)"
+    );
+    assert_eq!(crust.orogeny[crest], Orogeny::Andean);
+    // Uplift fades to nothing beyond r_s.
+    let far: Vec<f32> = line
+        .iter()
+        .filter(|&&i| mesh.positions[i].z.asin() * R > 2000.0)
+        .map(|&i| crust.elevation_km[i])
+        .collect();
+    assert!(
+        far.iter().all(|&z| (z - 0.3).abs() < 0.2),
+        "uplift beyond r_s"
+    );
+    // Trench offshore: the subducting plate deepens well below the abyssal plain near the front.
+    let trench = line
+        .iter()
+        .filter(|&&i| crust.plate[i] == 1 && mesh.positions[i].z.asin() * R > -600.0)
+        .map(|&i| crust.elevation_km[i])
+        .fold(f32::INFINITY, f32::min);
+    assert!(trench < -7.0, "trench only {trench} km deep");
+    // Fold directions across the front (north–south at longitude 90°).
+    let mut across = 0;
+    let mut total = 0;
+    for &i in &line {
+        let f = DVec3::from_array(crust.fold_dir[i].map(|c| c as f64));
+        if crust.plate[i] != 0 || f.length() < 1e-6 {
+            continue;
+        }
+        total += 1;
+        let p = mesh.positions[i];
+        let north = (DVec3::Z - p * p.z).normalize();
+        if f.normalize().dot(north).abs() > 0.9 {
+            across += 1;
+        }
+    }
+    assert!(
+        total > 10 && across * 10 >= total * 9,
+        "{across} of {total} fold directions across the front"
+    );
+}
+
+#[test]
+fn older_ocean_subducts_and_an_island_arc_rises_on_the_younger() {
+    let young = |_: DVec3| ocean(-3.0, 20.0);
+    let old = |_: DVec3| ocean(-5.0, 150.0);
+    let run = |subduction: bool| {
+        let mut sim = two_hemispheres(60_000, DVec3::X, 100.0, young, old);
+        sim.set_enabled("subduction", subduction).unwrap();
+        sim.run_steps(30).unwrap();
+        sim
+    };
+    let mut with = run(true);
+    let mut without = run(false);
+    let fronts: Vec<SubductionFront> = with
+        .world_mut()
+        .query::<&SubductionFront>()
+        .iter(with.world())
+        .cloned()
+        .collect();
+    assert!(!fronts.is_empty());
+    let summary: Vec<_> = fronts
+        .iter()
+        .map(|f| (f.overriding.0, f.subducting.0, f.kind, f.points.len()))
+        .collect();
+    let main = fronts.iter().max_by_key(|f| f.points.len()).unwrap();
+    assert_eq!(
+        (main.overriding.0, main.subducting.0, main.kind),
+        (0, 1, FrontKind::OceanUnderOcean),
+        "{summary:?}"
+    );
+    let (a, b) = (with.resampled_crust(), without.resampled_crust());
+    let mesh = with.mesh().clone();
+    let line = meridian_90(&mesh);
+    // Uplift profile on the young plate: peak near the control distance.
+    let (peak_i, peak_dz) = line
+        .iter()
+        .filter(|&&i| a.plate[i] == 0)
+        .map(|&i| (i, a.elevation_km[i] - b.elevation_km[i]))
+        .max_by(|x, y| x.1.total_cmp(&y.1))
+        .unwrap();
+    let peak_km = mesh.positions[peak_i].z.asin() * R;
+    assert!(peak_dz > 0.5, "the arc rose only {peak_dz} km");
+    assert!(
+        (300.0..1000.0).contains(&peak_km),
+        "arc {peak_km:.0} km from the front"
+    );
+}
+
+#[test]
+fn continents_collide_and_the_terrane_changes_plate() {
+    // A continent on the southern plate, centred 25° south of the front at longitude 90°,
+    // carried north into the northern continent.
+    let centre = tectonic_planets::geometry::from_lat_lon_deg(-25.0, 90.0);
+    let south = move |q: DVec3| {
+        if angle_between(q, centre) < 12f64.to_radians() {
+            continent(0.5)
+        } else {
+            ocean(-4.5, 100.0)
+        }
+    };
+    let mut sim = two_hemispheres(80_000, DVec3::X, 100.0, |_| continent(0.5), south);
+    let mesh = sim.mesh().clone();
+    let area0 = continental_area(&mesh, sim.crust());
+    let terrane: Vec<usize> = (0..mesh.len())
+        .filter(|&i| angle_between(mesh.positions[i], centre) < 11f64.to_radians())
+        .collect();
+    let mut collided_at = None;
+    for step in 0..60 {
+        if std::env::var("DEBUG_COLLISION").is_ok() {
+            let t = sim
+                .world()
+                .resource::<tectonic_planets::resources::TerraneField>();
+            let list: Vec<(u32, f64)> = t
+                .plate
+                .iter()
+                .zip(&t.area_km2)
+                .map(|(p, a)| (*p, *a))
+                .collect();
+            eprintln!(
+                "step {step}: terranes {list:?} since resample {}",
+                sim.clock().steps_since_resample
+            );
+        }
+        sim.step().unwrap();
+        if sim.world().resource::<Sutures>().total > 0 {
+            collided_at = Some(step);
+            break;
+        }
+    }
+    let step = collided_at.expect("no collision within 120 My");
+    assert!(
+        step >= 5,
+        "collision fired at step {step}, before the continents could meet"
+    );
+    assert_eq!(
+        sim.clock().steps_since_resample,
+        0,
+        "a collision resamples at once"
+    );
+    let crust = sim.crust().clone();
+    // The terrane now belongs to the northern plate.
+    let moved = terrane.iter().filter(|&&i| {
+        let q = mesh.positions[i];
+        // where the terrane's samples went: follow plate 1's motion... simpler: every continental
+        // sample south of the equator now belongs to plate 0.
+        q.z < 0.0
+    });
+    let _ = moved.count();
+    let south_cont: Vec<usize> = (0..mesh.len())
+        .filter(|&i| mesh.positions[i].z < 0.0 && crust.crust_type[i] == CrustType::Continental)
+        .collect();
+    assert!(!south_cont.is_empty());
+    let on_north_plate = south_cont.iter().filter(|&&i| crust.plate[i] == 0).count();
+    let stray: Vec<(f64, f64, f32, u32, u32)> = south_cont
+        .iter()
+        .filter(|&&i| crust.plate[i] != 0)
+        .take(10)
+        .map(|&i| {
+            let (la, lo) = tectonic_planets::geometry::to_lat_lon_deg(mesh.positions[i]);
+            let src = sim
+                .world()
+                .resource::<tectonic_planets::systems::resample::ResampleWork>()
+                .sources[i];
+            (la, lo, crust.elevation_km[i], crust.plate[i], src.suture)
+        })
+        .collect();
+    assert!(
+        on_north_plate * 10 >= south_cont.len() * 9,
+        "{on_north_plate} of {} terrane samples joined plate 0; others: {stray:?}",
+        south_cont.len()
+    );
+    // Himalayan uplift around the suture.
+    let himalayan: Vec<usize> = (0..mesh.len())
+        .filter(|&i| crust.orogeny[i] == Orogeny::Himalayan)
+        .collect();
+    assert!(
+        himalayan.len() > 20,
+        "{} Himalayan samples",
+        himalayan.len()
+    );
+    // Continental area conserved.
+    let area1 = continental_area(&mesh, &crust);
+    let change = (area1 - area0).abs() / area0;
+    assert!(
+        change < 0.02,
+        "continental area changed by {:.2}%",
+        100.0 * change
+    );
+}
+
+#[test]
+fn slab_pull_turns_the_pole_toward_the_front() {
+    let pole0 = DVec3::new(1.0, 0.0, 0.5).normalize();
+    let run = |pull: bool| {
+        let mut sim = two_hemispheres(
+            40_000,
+            pole0,
+            80.0,
+            |_| continent(0.3),
+            |_| ocean(-4.5, 100.0),
+        );
+        sim.set_enabled("slab_pull", pull).unwrap();
+        // Expected direction of the change: Σ c × q over the front, c the plate's centroid.
+        let fp = sim.world().resource::<FrontPoints>().clone();
+        let c = DVec3::new(0.0, 0.0, -1.0);
+        let mut e = DVec3::ZERO;
+        for k in 0..fp.len() {
+            let q = sim.mesh().positions[fp.sample[k] as usize];
+            e += c.cross(q).normalize();
+        }
+        sim.run_steps(10).unwrap();
+        let pole = sim.plate_table().get(1).unwrap().motion.euler_pole;
+        (pole, e.normalize())
+    };
+    let (with, e) = run(true);
+    let (without, _) = run(false);
+    assert!(
+        (without - pole0).length() < 1e-12,
+        "the pole moved without slab pull"
+    );
+    assert!(
+        with.dot(e) > pole0.dot(e) + 1e-3,
+        "pole did not turn toward the front: {pole0:?} -> {with:?}, expected toward {e:?}"
+    );
+}

@@ -546,5 +546,34 @@ fn bench(a: BenchArgs) -> Result<()> {
             peak as f64 / n as f64
         );
     }
+    bench_saves(&mut sim)
+}
+
+/// Times a save (encode, compress, write, sync) and a load (read, check, decompress, rebuild the
+/// mesh, restore) of the benchmark planet, and gives the file size.
+fn bench_saves(sim: &mut Simulation) -> Result<()> {
+    let path = std::env::temp_dir().join(format!(
+        "planet-bench-{}.{}",
+        std::process::id(),
+        save::EXTENSION
+    ));
+    let t = Instant::now();
+    let info = save::save_to_file(sim, &path)?;
+    let save_ms = t.elapsed().as_secs_f64() * 1e3;
+    let t = Instant::now();
+    let mut loaded = save::load_from_file(&path)?;
+    let load_ms = t.elapsed().as_secs_f64() * 1e3;
+    let _ = std::fs::remove_file(&path);
+    if loaded.state_hash() != sim.state_hash() {
+        bail!("the loaded planet differs from the saved one");
+    }
+    println!("{:<28} {:>10.1} ms", "save to file", save_ms);
+    println!("{:<28} {:>10.1} ms", "load from file", load_ms);
+    println!(
+        "{:<28} {:>10.1} MB  ({:.1} MB before compression)",
+        "save file size",
+        info.file_bytes as f64 / 1e6,
+        info.raw_bytes as f64 / 1e6
+    );
     Ok(())
 }

@@ -681,7 +681,7 @@ fn rss_bytes(key: &str) -> Option<u64> {
 /// 2000 steps at 50,000 samples, saving every 100 steps: no NaN (a step fails on one), and
 /// memory flat between step 200 and step 2000.
 #[test]
-#[ignore = "soak test, about a minute: run with --ignored --nocapture"]
+#[ignore = "soak test (2000 steps at 50,000 samples): run with --ignored --nocapture"]
 fn soak_2000_steps_with_saves() {
     let dir = temp_dir("soak");
     let path = dir.join("soak.planet");
@@ -716,5 +716,168 @@ fn soak_2000_steps_with_saves() {
     assert!(
         rss as f64 <= 1.1 * rss_200 as f64 && peak as f64 <= 1.1 * peak_200 as f64,
         "memory grew: rss {rss_200} -> {rss}, peak {peak_200} -> {peak}"
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Command line.
+
+fn planet() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_planet"))
+}
+
+fn cli_fails_with(args: &[&std::ffi::OsStr], needles: &[&str]) {
+    let out = planet().args(args).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{args:?} should fail: {stderr}");
+    assert!(!stderr.contains("panicked"), "{args:?} panicked: {stderr}");
+    for n in needles {
+        assert!(stderr.contains(n), "{args:?}: {stderr} lacks {n:?}");
+    }
+}
+
+#[test]
+fn generate_resume_export_from_the_command_line() {
+    let dir = temp_dir("cli");
+    let run = |args: Vec<std::ffi::OsString>| {
+        let out = planet().current_dir(&dir).args(&args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let common = [
+        "--samples",
+        "5000",
+        "--plates",
+        "10",
+        "--width",
+        "32",
+        "--quiet",
+    ];
+    let args = |extra: &[&str]| -> Vec<std::ffi::OsString> {
+        extra
+            .iter()
+            .chain(common.iter())
+            .map(|s| s.into())
+            .collect()
+    };
+    // 8 My with a save every 4 My into saves/, then 6 more My resumed into another file.
+    run(args(&[
+        "generate",
+        "--my",
+        "8",
+        "--out",
+        "o1",
+        "--save",
+        "a.planet",
+        "--save-every",
+        "4",
+    ]));
+    assert!(
+        dir.join("saves/a.planet").is_file(),
+        "bare names go to saves/"
+    );
+    let out = planet()
+        .current_dir(&dir)
+        .args([
+            "resume",
+            "saves/a.planet",
+            "--my",
+            "6",
+            "--save",
+            "b.planet",
+            "--out",
+            "o2",
+        ])
+        .args(["--width", "32", "--quiet"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    run(args(&[
+        "generate", "--my", "14", "--out", "o3", "--save", "c.planet",
+    ]));
+    let mut resumed = save::load_from_file(&dir.join("saves/b.planet")).unwrap();
+    let mut straight = save::load_from_file(&dir.join("saves/c.planet")).unwrap();
+    assert_eq!(resumed.clock().step, 7);
+    assert_eq!(
+        resumed.state_hash(),
+        straight.state_hash(),
+        "resume is exact"
+    );
+    let history = &resumed.world().resource::<CommandHistory>().entries;
+    assert_eq!(history.len(), 2, "{history:?}");
+    assert_eq!(history[1].0, 4);
+    assert!(history[1].1.contains("resume"));
+    // Maps from the resumed run, from the straight run and exported from the save agree.
+    let out = planet()
+        .current_dir(&dir)
+        .args([
+            "export",
+            "saves/b.planet",
+            "--out",
+            "o4",
+            "--width",
+            "32",
+            "--quiet",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let png = |d: &str| std::fs::read(dir.join(d).join("elevation.png")).unwrap();
+    assert_eq!(png("o2"), png("o3"));
+    assert_eq!(png("o2"), png("o4"));
+
+    // Bad save files and options, through the command line.
+    let text = dir.join("notes.txt");
+    std::fs::write(&text, "hello").unwrap();
+    let os = |s: &str| std::ffi::OsString::from(s);
+    cli_fails_with(
+        &[
+            &os("resume"),
+            dir.join("nope.planet").as_os_str(),
+            &os("--my"),
+            &os("2"),
+        ],
+        &["nope.planet", "no such file"],
+    );
+    cli_fails_with(&[&os("export"), dir.as_os_str()], &["directory"]);
+    cli_fails_with(
+        &[
+            &os("export"),
+            text.as_os_str(),
+            &os("--out"),
+            dir.join("o5").as_os_str(),
+        ],
+        &["notes.txt", "not a planet save"],
+    );
+    cli_fails_with(
+        &[
+            &os("resume"),
+            dir.join("saves/b.planet").as_os_str(),
+            &os("--my"),
+            &os("2"),
+            &os("--save-every"),
+            &os("0"),
+        ],
+        &["--save-every"],
+    );
+    cli_fails_with(
+        &[
+            &os("resume"),
+            dir.join("saves/b.planet").as_os_str(),
+            &os("--my"),
+            &os("nan"),
+        ],
+        &["--my"],
     );
 }

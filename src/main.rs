@@ -261,7 +261,7 @@ fn command_line() -> String {
 }
 
 fn check_width(width: u32) -> Result<()> {
-    if width < 2 || width > 16384 || !width.is_multiple_of(2) {
+    if !(2..=16384).contains(&width) || !width.is_multiple_of(2) {
         bail!("--width must be an even number between 2 and 16384, got {width}");
     }
     Ok(())

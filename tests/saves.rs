@@ -218,6 +218,17 @@ impl Plugin for CounterWithDefaultPlugin {
     }
 }
 
+struct CounterV2Plugin;
+impl Plugin for CounterV2Plugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<Counter>()
+            .register_save_section(SaveSection {
+                version: 2,
+                ..counter_section(false)
+            });
+    }
+}
+
 #[test]
 fn plugin_sections_are_saved_and_checked() {
     let p = small_params(2_000, 9);
@@ -271,6 +282,25 @@ fn plugin_sections_are_saved_and_checked() {
     )
     .unwrap();
     assert_eq!(ok.world().resource::<Counter>().0, 1000);
+
+    // A section written by a newer version of its plugin is refused.
+    let mut v2 = Simulation::with_plugins(
+        small_params(2_000, 9),
+        TectonicPlugins.build().add(CounterV2Plugin),
+    )
+    .unwrap();
+    let v2_bytes = save::save_to_bytes(&mut v2).unwrap();
+    let e = save::load_from_bytes_with(
+        &v2_bytes,
+        Path::new("<t>"),
+        TectonicPlugins.build().add(CounterPlugin),
+    )
+    .err()
+    .expect("a newer section must be refused");
+    assert!(
+        matches!(&e.kind, LoadErrorKind::NewerSection { section, found: 2, supported: 1 } if section == "test.counter"),
+        "{e}"
+    );
 
     // A save made with a phenomenon switched off needs that phenomenon's plugin.
     let e = save::load_from_bytes_with(

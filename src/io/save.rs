@@ -1011,7 +1011,13 @@ pub fn save_to_bytes_with(
         .par_iter()
         .map(|r| {
             if opts.compress {
-                (CODEC_LZ4, lz4_flex::block::compress(r))
+                let z = lz4_flex::block::compress(r);
+                // Incompressible content is stored as is.
+                if z.len() < r.len() {
+                    (CODEC_LZ4, z)
+                } else {
+                    (CODEC_RAW, Vec::new())
+                }
             } else {
                 (CODEC_RAW, Vec::new())
             }
@@ -1346,6 +1352,16 @@ pub fn load_from_bytes_with(
     };
     let sections = read_sections(bytes, file)?;
     let find = |name: &str| sections.iter().find(|s| s.name == name);
+    // The bootstrap sections are read before the registry exists: check their versions here.
+    for s in &sections {
+        if (s.name == "core.params" || s.name == "core.mesh") && s.version > 1 {
+            return Err(fail(LoadErrorKind::NewerSection {
+                section: s.name.clone(),
+                found: s.version,
+                supported: 1,
+            }));
+        }
+    }
     // Bootstrap: parameters and mesh recipe, needed to build the world.
     let params_s = find("core.params")
         .ok_or_else(|| fail(LoadErrorKind::MissingSection("core.params".into())))?;

@@ -9,6 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use tectonic_planets::Simulation;
 use tectonic_planets::io::maps::{Raster, write_all_maps};
 use tectonic_planets::io::params::{ParamValue, Params};
+use tectonic_planets::io::save::{self, CommandHistory};
 use tectonic_planets::io::summary::{CrustSampler, summarize};
 use tectonic_planets::plugins::TectonicSystems;
 
@@ -37,6 +38,60 @@ enum Command {
     Plugins,
     /// Measure the time per step of each system set, one resampling, and memory.
     Bench(BenchArgs),
+    /// Continue a saved planet for some more million years, then save it (and write maps).
+    Resume(ResumeArgs),
+    /// Write the maps and summary of a saved planet, as `generate` does.
+    Export(ExportArgs),
+}
+
+/// Where and how often to save.
+#[derive(Args, Clone)]
+struct SaveArgs {
+    /// Save the planet to this file at the end (a bare file name goes into `saves/`).
+    #[arg(long)]
+    save: Option<PathBuf>,
+    /// Also save every this many million years while running (to the `--save` file, or to
+    /// `saves/planet-<seed>.planet` when none is given).
+    #[arg(long, value_name = "MY")]
+    save_every: Option<f64>,
+}
+
+#[derive(Args)]
+struct ResumeArgs {
+    /// The save to continue.
+    file: PathBuf,
+    /// Simulated time to add, million years.
+    #[arg(long)]
+    my: f64,
+    /// Also write maps and summary.json into this folder.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    #[command(flatten)]
+    saving: SaveArgs,
+    /// Width of the equirectangular maps in pixels (height is half).
+    #[arg(long, default_value_t = 2048)]
+    width: u32,
+    /// Worker threads (default: all cores). Results do not depend on it.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
+#[derive(Args)]
+struct ExportArgs {
+    /// The save to export.
+    file: PathBuf,
+    /// Output folder for the maps and summary.json.
+    #[arg(long, default_value = "out")]
+    out: PathBuf,
+    /// Width of the equirectangular maps in pixels (height is half).
+    #[arg(long, default_value_t = 2048)]
+    width: u32,
+    /// No listing of the files written.
+    #[arg(long)]
+    quiet: bool,
 }
 
 /// Options shared by every command that builds a planet.
@@ -81,6 +136,8 @@ struct GenerateArgs {
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
+    #[command(flatten)]
+    saving: SaveArgs,
 }
 
 #[derive(Args)]
@@ -137,6 +194,8 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Bench(a) => bench(a),
+        Command::Resume(a) => resume(a),
+        Command::Export(a) => export(a),
     }
 }
 
@@ -195,24 +254,79 @@ fn build_sim(a: &PlanetArgs) -> Result<Simulation> {
     Ok(sim)
 }
 
-fn generate(a: GenerateArgs) -> Result<()> {
-    if !a.my.is_finite() || a.my < 0.0 {
-        bail!(
-            "--my must be a finite, non-negative number of million years, got {}",
-            a.my
-        );
+/// The command line as typed, for the command history of saves.
+fn command_line() -> String {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    format!("planet {}", args.join(" "))
+}
+
+fn check_width(width: u32) -> Result<()> {
+    if !(2..=16384).contains(&width) || !width.is_multiple_of(2) {
+        bail!("--width must be an even number between 2 and 16384, got {width}");
     }
-    if a.width < 2 || a.width > 16384 || !a.width.is_multiple_of(2) {
-        bail!(
-            "--width must be an even number between 2 and 16384, got {}",
-            a.width
-        );
+    Ok(())
+}
+
+fn check_my(flag: &str, my: f64) -> Result<()> {
+    if !my.is_finite() || my < 0.0 {
+        bail!("{flag} must be a finite, non-negative number of million years, got {my}");
     }
-    prepare_out_dir(&a.out)?;
-    let started = Instant::now();
-    let mut sim = build_sim(&a.planet)?;
-    let steps = sim.steps_for(a.my)?;
-    let bar = if a.quiet {
+    Ok(())
+}
+
+/// The save file and the number of steps between saves, from the options.
+fn save_plan(
+    sim: &Simulation,
+    s: &SaveArgs,
+    default: Option<&Path>,
+) -> Result<Option<(PathBuf, u64)>> {
+    let every = match s.save_every {
+        Some(my) => {
+            if !my.is_finite() || my <= 0.0 {
+                bail!("--save-every must be a finite, positive number of million years, got {my}");
+            }
+            sim.steps_for(my)?.max(1)
+        }
+        None => 0,
+    };
+    let path = match (&s.save, default) {
+        (Some(p), _) => Some(save::resolve_save_path(p)),
+        (None, Some(d)) => Some(d.to_path_buf()),
+        (None, None) if every > 0 => Some(Path::new(save::DEFAULT_DIR).join(format!(
+            "planet-{}.{}",
+            sim.params().planet.seed,
+            save::EXTENSION
+        ))),
+        (None, None) => None,
+    };
+    if let Some(p) = &path
+        && p.is_dir()
+    {
+        bail!("save path {} is a folder, not a file", p.display());
+    }
+    Ok(path.map(|p| (p, every)))
+}
+
+fn save_now(sim: &mut Simulation, path: &Path) -> Result<()> {
+    let t = Instant::now();
+    let info = save::save_to_file(sim, path)?;
+    tracing::info!(
+        path = %path.display(),
+        bytes = info.file_bytes,
+        ms = t.elapsed().as_secs_f64() * 1e3,
+        "saved"
+    );
+    Ok(())
+}
+
+/// Runs `steps` steps with a progress bar, saving every `plan.1` steps (when non-zero).
+fn run_steps_with_progress(
+    sim: &mut Simulation,
+    steps: u64,
+    quiet: bool,
+    plan: Option<&(PathBuf, u64)>,
+) -> Result<()> {
+    let bar = if quiet {
         ProgressBar::hidden()
     } else {
         ProgressBar::new(steps)
@@ -227,6 +341,13 @@ fn generate(a: GenerateArgs) -> Result<()> {
     let dt = sim.params().time.time_step_my;
     for k in 0..steps {
         sim.step()?;
+        if let Some((path, every)) = plan
+            && *every > 0
+            && (k + 1) % every == 0
+            && k + 1 < steps
+        {
+            save_now(sim, path)?;
+        }
         bar.set_message(format!(
             "{:.0}/{:.0} My",
             (k + 1) as f64 * dt,
@@ -235,33 +356,106 @@ fn generate(a: GenerateArgs) -> Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
+    Ok(())
+}
+
+/// Writes the maps and summary of `sim` into `out`; returns the files written.
+fn write_outputs(sim: &mut Simulation, out: &Path, width: u32) -> Result<Vec<PathBuf>> {
+    prepare_out_dir(out)?;
     let view = sim.resampled_crust();
     let raster = Raster::sample(
         &CrustSampler {
             mesh: sim.mesh(),
             crust: &view,
         },
-        a.width,
-        a.width / 2,
+        width,
+        width / 2,
     )?;
-    let files = write_all_maps(&raster, &a.out, sim.params().planet.radius_km)?;
-    let summary = summarize(&sim, &view);
-    let summary_path = a.out.join("summary.json");
+    let mut files = write_all_maps(&raster, out, sim.params().planet.radius_km)?;
+    let summary = summarize(sim, &view);
+    let summary_path = out.join("summary.json");
     std::fs::write(&summary_path, serde_json::to_string_pretty(&summary)?)
         .with_context(|| format!("could not write {}", summary_path.display()))?;
+    files.push(summary_path);
+    Ok(files)
+}
+
+fn report(sim: &Simulation, started: Instant, files: &[PathBuf]) {
+    let s = sim.stats();
+    eprintln!(
+        "{} samples, {} plates, {:.0} My in {:.1} s: land {:.1}%, continental crust {:.1}%",
+        sim.mesh().len(),
+        s.plates,
+        sim.time_my(),
+        started.elapsed().as_secs_f64(),
+        100.0 * s.land_fraction,
+        100.0 * s.continental_fraction
+    );
+    for f in files {
+        eprintln!("  wrote {}", f.display());
+    }
+}
+
+fn generate(a: GenerateArgs) -> Result<()> {
+    check_my("--my", a.my)?;
+    check_width(a.width)?;
+    prepare_out_dir(&a.out)?;
+    let started = Instant::now();
+    let mut sim = build_sim(&a.planet)?;
+    sim.world_mut()
+        .resource_mut::<CommandHistory>()
+        .record(0, command_line());
+    let plan = save_plan(&sim, &a.saving, None)?;
+    let steps = sim.steps_for(a.my)?;
+    run_steps_with_progress(&mut sim, steps, a.quiet, plan.as_ref())?;
+    let mut files = write_outputs(&mut sim, &a.out, a.width)?;
+    if let Some((path, _)) = &plan {
+        save_now(&mut sim, path)?;
+        files.push(path.clone());
+    }
     if !a.quiet {
-        eprintln!(
-            "{} samples, {} plates, {:.0} My in {:.1} s: land {:.1}%, continental crust {:.1}%",
-            summary.samples,
-            summary.plates,
-            summary.time_my,
-            started.elapsed().as_secs_f64(),
-            100.0 * summary.land_fraction,
-            100.0 * summary.continental_fraction
-        );
-        for f in files.iter().chain(std::iter::once(&summary_path)) {
-            eprintln!("  wrote {}", f.display());
-        }
+        report(&sim, started, &files);
+    }
+    Ok(())
+}
+
+fn resume(a: ResumeArgs) -> Result<()> {
+    check_my("--my", a.my)?;
+    check_width(a.width)?;
+    setup_threads(a.threads)?;
+    if let Some(out) = &a.out {
+        prepare_out_dir(out)?;
+    }
+    let started = Instant::now();
+    let mut sim = save::load_from_file(&a.file)?;
+    let step = sim.clock().step;
+    sim.world_mut()
+        .resource_mut::<CommandHistory>()
+        .record(step, command_line());
+    let plan = save_plan(&sim, &a.saving, Some(&a.file))?;
+    let steps = sim.steps_for(a.my)?;
+    run_steps_with_progress(&mut sim, steps, a.quiet, plan.as_ref())?;
+    let mut files = Vec::new();
+    if let Some(out) = &a.out {
+        files = write_outputs(&mut sim, out, a.width)?;
+    }
+    if let Some((path, _)) = &plan {
+        save_now(&mut sim, path)?;
+        files.push(path.clone());
+    }
+    if !a.quiet {
+        report(&sim, started, &files);
+    }
+    Ok(())
+}
+
+fn export(a: ExportArgs) -> Result<()> {
+    check_width(a.width)?;
+    let started = Instant::now();
+    let mut sim = save::load_from_file(&a.file)?;
+    let files = write_outputs(&mut sim, &a.out, a.width)?;
+    if !a.quiet {
+        report(&sim, started, &files);
     }
     Ok(())
 }
@@ -352,5 +546,34 @@ fn bench(a: BenchArgs) -> Result<()> {
             peak as f64 / n as f64
         );
     }
+    bench_saves(&mut sim)
+}
+
+/// Times a save (encode, compress, write, sync) and a load (read, check, decompress, rebuild the
+/// mesh, restore) of the benchmark planet, and gives the file size.
+fn bench_saves(sim: &mut Simulation) -> Result<()> {
+    let path = std::env::temp_dir().join(format!(
+        "planet-bench-{}.{}",
+        std::process::id(),
+        save::EXTENSION
+    ));
+    let t = Instant::now();
+    let info = save::save_to_file(sim, &path)?;
+    let save_ms = t.elapsed().as_secs_f64() * 1e3;
+    let t = Instant::now();
+    let mut loaded = save::load_from_file(&path)?;
+    let load_ms = t.elapsed().as_secs_f64() * 1e3;
+    let _ = std::fs::remove_file(&path);
+    if loaded.state_hash() != sim.state_hash() {
+        bail!("the loaded planet differs from the saved one");
+    }
+    println!("{:<28} {:>10.1} ms", "save to file", save_ms);
+    println!("{:<28} {:>10.1} ms", "load from file", load_ms);
+    println!(
+        "{:<28} {:>10.1} MB  ({:.1} MB before compression)",
+        "save file size",
+        info.file_bytes as f64 / 1e6,
+        info.raw_bytes as f64 / 1e6
+    );
     Ok(())
 }

@@ -84,6 +84,7 @@ impl Simulation {
             .insert_resource(crust)
             .insert_resource(NextPlateId(next_id));
         app.add_plugins(TectonicSchedulePlugin);
+        app.add_plugins(crate::io::save::CoreSavePlugin);
         app.add_plugins(plugins);
         app.finish();
         app.cleanup();
@@ -108,6 +109,29 @@ impl Simulation {
         let mut sim = Self { app };
         sim.refresh_stats();
         Ok(sim)
+    }
+
+    /// A simulation with `params`, `mesh`, the schedule and `plugins` but no initial planet: an
+    /// empty crust and no plates. Used by the save loader, which fills in the rest of the state
+    /// through the registered save sections and then calls [`Self::finish_load`].
+    pub(crate) fn from_parts(params: Params, mesh: SphereMesh, plugins: impl PluginGroup) -> Self {
+        let n = mesh.len();
+        let mut app = App::empty();
+        app.insert_resource(params)
+            .insert_resource(mesh)
+            .insert_resource(Crust::with_len(n))
+            .insert_resource(NextPlateId(0));
+        app.add_plugins(TectonicSchedulePlugin);
+        app.add_plugins(crate::io::save::CoreSavePlugin);
+        app.add_plugins(plugins);
+        app.finish();
+        app.cleanup();
+        Self { app }
+    }
+
+    /// Refreshes the derived resources after a load.
+    pub(crate) fn finish_load(&mut self) {
+        self.refresh_stats();
     }
 
     fn refresh_stats(&mut self) {

@@ -1,5 +1,6 @@
-//! Input and output: parameters (TOML), map rendering (PNG) and run summaries (JSON).
+//! Input and output: parameters (TOML), map rendering (PNG), run summaries (JSON) and saves.
 
 pub mod maps;
 pub mod params;
+pub mod save;
 pub mod summary;

@@ -1,0 +1,913 @@
+//! Saves: exact round trips, exact resume at any step, plugin sections, safe writes, clear
+//! errors on every kind of bad file (and thousands of mutated ones), the compatibility fixture,
+//! and a soak run (ignored: `cargo test --release --test saves -- --ignored --nocapture`).
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::*;
+use tectonic_planets::io::save::{
+    self, CommandHistory, LoadErrorKind, SaveAppExt, SaveOptions, SaveSection, SectionReader,
+    SectionWriter,
+};
+use tectonic_planets::prelude::*;
+use tectonic_planets::random::SimRng;
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("planet-saves-{}-{}", name, std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Small planet with frequent resamplings, so short runs cross several.
+fn small_params(samples: u64, seed: u64) -> Params {
+    let mut p = params(samples, seed);
+    p.init.plates = 12;
+    p.resample.min_interval_steps = 4;
+    p.resample.max_interval_steps = 9;
+    p
+}
+
+fn round_trip(sim: &mut Simulation) -> Simulation {
+    let bytes = save::save_to_bytes(sim).unwrap();
+    save::load_from_bytes(&bytes, Path::new("<test>")).unwrap()
+}
+
+fn plate_meshes(sim: &mut Simulation) -> Vec<(u32, PlateMesh, PlateBounds, PlateStats)> {
+    let world = sim.world_mut();
+    let mut q = world.query::<(&Plate, &PlateMesh, &PlateBounds, &PlateStats)>();
+    let mut v: Vec<_> = q
+        .iter(world)
+        .map(|(p, m, b, s)| (p.id.0, m.clone(), *b, *s))
+        .collect();
+    v.sort_by_key(|x| x.0);
+    v
+}
+
+#[test]
+fn save_and_load_restore_every_bit() {
+    let mut sim = Simulation::new(small_params(5_000, 11)).unwrap();
+    sim.set_enabled("erosion", false).unwrap();
+    sim.world_mut()
+        .resource_mut::<CommandHistory>()
+        .record(0, "planet generate --test");
+    sim.run_steps(6).unwrap();
+    assert_ne!(
+        sim.clock().steps_since_resample,
+        0,
+        "the save is taken between two resamplings"
+    );
+    sim.request_resample();
+    let mut back = round_trip(&mut sim);
+    assert_eq!(back.state_hash(), sim.state_hash());
+    assert_eq!(back.crust(), sim.crust());
+    assert_eq!(back.clock(), sim.clock());
+    assert_eq!(back.params(), sim.params());
+    assert_eq!(back.phenomena(), sim.phenomena());
+    assert!(
+        !back
+            .phenomena()
+            .iter()
+            .any(|p| p.name == "erosion" && p.enabled)
+    );
+    assert_eq!(plate_meshes(&mut back), plate_meshes(&mut sim));
+    assert_eq!(
+        back.world().resource::<CommandHistory>(),
+        sim.world().resource::<CommandHistory>()
+    );
+    assert_eq!(back.stats(), sim.stats());
+    // The pending resample request came along: both resample on the next step.
+    let r = sim.clock().resamplings;
+    sim.step().unwrap();
+    back.step().unwrap();
+    assert_eq!(back.clock().resamplings, r + 1);
+    assert_eq!(back.state_hash(), sim.state_hash());
+}
+
+#[test]
+fn resume_at_any_step_matches_a_straight_run() {
+    const TOTAL: u64 = 30;
+    let p = small_params(8_000, 3);
+    let mut straight = Simulation::new(p.clone()).unwrap();
+    let mut resample_steps = Vec::new();
+    for _ in 0..TOTAL {
+        let r = straight.clock().resamplings;
+        straight.step().unwrap();
+        if straight.clock().resamplings > r {
+            resample_steps.push(straight.clock().step);
+        }
+    }
+    assert!(
+        resample_steps.len() >= 3,
+        "the run resamples several times: {resample_steps:?}"
+    );
+    let expected = straight.state_hash();
+    let r0 = resample_steps[0];
+    let mut ks = vec![
+        0,
+        1,
+        r0 - 1,
+        r0,
+        r0 + 1,
+        r0 + 2,
+        resample_steps[1] - 1,
+        TOTAL - 1,
+    ];
+    ks.dedup();
+    let mut mid_interval = 0;
+    for k in ks {
+        let mut sim = Simulation::new(p.clone()).unwrap();
+        sim.run_steps(k).unwrap();
+        if sim.clock().steps_since_resample != 0 {
+            mid_interval += 1;
+        }
+        let mut resumed = round_trip(&mut sim);
+        resumed.run_steps(TOTAL - k).unwrap();
+        assert_eq!(
+            resumed.state_hash(),
+            expected,
+            "resumed at step {k}: differs from the straight run"
+        );
+        assert_eq!(resumed.crust().hash(), straight.crust().hash());
+    }
+    assert!(mid_interval >= 4, "several saves fall between resamplings");
+}
+
+#[test]
+fn save_file_round_trip_and_default_folder() {
+    let dir = temp_dir("file");
+    let mut sim = Simulation::new(small_params(3_000, 5)).unwrap();
+    sim.run_steps(3).unwrap();
+    let path = dir.join("x.planet");
+    let info = save::save_to_file(&mut sim, &path).unwrap();
+    assert_eq!(info.file_bytes, std::fs::metadata(&path).unwrap().len());
+    assert!(info.raw_bytes > info.file_bytes, "sections are compressed");
+    let mut back = save::load_from_file(&path).unwrap();
+    assert_eq!(back.state_hash(), sim.state_hash());
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(leftovers.len(), 1, "no temporary file left: {leftovers:?}");
+    assert_eq!(
+        save::resolve_save_path(Path::new("a.planet")),
+        Path::new("saves").join("a.planet")
+    );
+    assert_eq!(
+        save::resolve_save_path(Path::new("/tmp/a.planet")),
+        Path::new("/tmp/a.planet")
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Plugin sections.
+
+#[derive(Resource, Default, Clone, Debug, PartialEq)]
+struct Counter(u64);
+
+fn count(mut c: ResMut<Counter>) {
+    c.0 += 3;
+}
+
+fn save_counter(world: &mut World, w: &mut SectionWriter) -> Result<(), String> {
+    w.u64(world.resource::<Counter>().0);
+    Ok(())
+}
+
+fn load_counter(world: &mut World, r: &mut SectionReader, _v: u32) -> Result<(), String> {
+    let v = r.u64()?;
+    r.finish()?;
+    world.resource_mut::<Counter>().0 = v;
+    Ok(())
+}
+
+fn counter_section(default: bool) -> SaveSection {
+    SaveSection {
+        name: "test.counter",
+        version: 1,
+        save: save_counter,
+        load: load_counter,
+        default: if default {
+            Some(|w| {
+                w.resource_mut::<Counter>().0 = 1000;
+                Ok(())
+            })
+        } else {
+            None
+        },
+    }
+}
+
+struct CounterPlugin;
+impl Plugin for CounterPlugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<Counter>()
+            .add_systems(TectonicStep, count.in_set(TectonicSystems::Aging))
+            .register_save_section(counter_section(false));
+    }
+}
+
+struct CounterWithDefaultPlugin;
+impl Plugin for CounterWithDefaultPlugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<Counter>()
+            .add_systems(TectonicStep, count.in_set(TectonicSystems::Aging))
+            .register_save_section(counter_section(true));
+    }
+}
+
+struct CounterV2Plugin;
+impl Plugin for CounterV2Plugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<Counter>()
+            .register_save_section(SaveSection {
+                version: 2,
+                ..counter_section(false)
+            });
+    }
+}
+
+#[test]
+fn plugin_sections_are_saved_and_checked() {
+    let p = small_params(2_000, 9);
+    let mut sim =
+        Simulation::with_plugins(p.clone(), TectonicPlugins.build().add(CounterPlugin)).unwrap();
+    sim.run_steps(4).unwrap();
+    let bytes = save::save_to_bytes(&mut sim).unwrap();
+    let names: Vec<String> = save::read_sections(&bytes, Path::new("<t>"))
+        .unwrap()
+        .into_iter()
+        .map(|s| s.name)
+        .collect();
+    assert!(names.contains(&"test.counter".to_string()), "{names:?}");
+
+    let mut back = save::load_from_bytes_with(
+        &bytes,
+        Path::new("<t>"),
+        TectonicPlugins.build().add(CounterPlugin),
+    )
+    .unwrap();
+    assert_eq!(back.world().resource::<Counter>().0, 12);
+    back.step().unwrap();
+    assert_eq!(back.world().resource::<Counter>().0, 15);
+
+    // A save with a section no plugin reads is refused, naming it.
+    let e = save::load_from_bytes(&bytes, Path::new("with-counter.planet"))
+        .err()
+        .expect("an unknown section must be refused");
+    assert!(matches!(&e.kind, LoadErrorKind::UnknownSection(s) if s == "test.counter"));
+    let msg = e.to_string();
+    assert!(
+        msg.contains("test.counter") && msg.contains("with-counter.planet"),
+        "{msg}"
+    );
+
+    // A save lacking a section a plugin needs is refused unless the plugin has a default.
+    let mut plain = Simulation::new(p).unwrap();
+    let plain_bytes = save::save_to_bytes(&mut plain).unwrap();
+    let e = save::load_from_bytes_with(
+        &plain_bytes,
+        Path::new("<t>"),
+        TectonicPlugins.build().add(CounterPlugin),
+    )
+    .err()
+    .expect("a missing section must be refused");
+    assert!(matches!(&e.kind, LoadErrorKind::MissingSection(s) if s == "test.counter"));
+    let ok = save::load_from_bytes_with(
+        &plain_bytes,
+        Path::new("<t>"),
+        TectonicPlugins.build().add(CounterWithDefaultPlugin),
+    )
+    .unwrap();
+    assert_eq!(ok.world().resource::<Counter>().0, 1000);
+
+    // A section written by a newer version of its plugin is refused.
+    let mut v2 = Simulation::with_plugins(
+        small_params(2_000, 9),
+        TectonicPlugins.build().add(CounterV2Plugin),
+    )
+    .unwrap();
+    let v2_bytes = save::save_to_bytes(&mut v2).unwrap();
+    let e = save::load_from_bytes_with(
+        &v2_bytes,
+        Path::new("<t>"),
+        TectonicPlugins.build().add(CounterPlugin),
+    )
+    .err()
+    .expect("a newer section must be refused");
+    assert!(
+        matches!(&e.kind, LoadErrorKind::NewerSection { section, found: 2, supported: 1 } if section == "test.counter"),
+        "{e}"
+    );
+
+    // A save made with a phenomenon switched off needs that phenomenon's plugin.
+    let e = save::load_from_bytes_with(
+        &plain_bytes,
+        Path::new("<t>"),
+        TectonicPlugins.build().disable::<ErosionPlugin>(),
+    )
+    .err()
+    .expect("a phenomenon this build lacks must be refused");
+    assert!(e.to_string().contains("erosion"), "{e}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Safe writes.
+
+#[test]
+fn a_failed_write_keeps_the_previous_save() {
+    let dir = temp_dir("atomic");
+    let path = dir.join("keep.planet");
+    let mut sim = Simulation::new(small_params(2_000, 4)).unwrap();
+    save::save_to_file(&mut sim, &path).unwrap();
+    let before = std::fs::read(&path).unwrap();
+    let hash = sim.state_hash();
+    sim.run_steps(2).unwrap();
+    let next = save::save_to_bytes(&mut sim).unwrap();
+    // A writer that fails halfway (a full disk), and one that fails at once.
+    for cut in [next.len() / 2, 0, next.len() - 1] {
+        let err = save::write_atomic(&path, |w| {
+            w.write_all(&next[..cut])?;
+            w.flush()?;
+            Err(std::io::Error::new(
+                std::io::ErrorKind::StorageFull,
+                "no space left on device",
+            ))
+        })
+        .unwrap_err();
+        let msg = err.to_string();
+        assert!(
+            msg.contains("keep.planet") && msg.contains("no space left"),
+            "{msg}"
+        );
+        assert_eq!(
+            std::fs::read(&path).unwrap(),
+            before,
+            "previous save intact"
+        );
+        let files = std::fs::read_dir(&dir).unwrap().count();
+        assert_eq!(files, 1, "the temporary file was removed");
+    }
+    assert_eq!(save::load_from_file(&path).unwrap().state_hash(), hash);
+    // Writing over a folder is refused clearly.
+    let err = save::save_to_file(&mut sim, &dir).unwrap_err();
+    assert!(err.to_string().contains("directory"), "{err}");
+}
+
+#[test]
+fn killing_a_saving_process_never_destroys_the_save() {
+    let dir = temp_dir("kill");
+    let path = dir.join("run.planet");
+    let mut rng = SimRng::new(77, 1);
+    let mut loaded = 0;
+    for round in 0..6 {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_planet"))
+            .args([
+                "generate",
+                "--samples",
+                "20000",
+                "--my",
+                "100000",
+                "--save-every",
+                "2",
+                "--quiet",
+                "--width",
+                "16",
+                "--threads",
+                "1",
+                "--save",
+            ])
+            .arg(&path)
+            .arg("--out")
+            .arg(dir.join("out"))
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        // Let it save a few times (or at least start), then kill it at a random moment.
+        let wait_ms = if round == 0 { 2500 } else { 300 } + (rng.next_u64() % 700);
+        std::thread::sleep(std::time::Duration::from_millis(wait_ms));
+        child.kill().unwrap();
+        child.wait().unwrap();
+        if path.exists() {
+            let sim = save::load_from_file(&path)
+                .unwrap_or_else(|e| panic!("round {round}: the save was damaged: {e}"));
+            assert!(sim.clock().step > 0);
+            loaded += 1;
+        }
+    }
+    assert!(loaded >= 5, "the save existed after most kills ({loaded})");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bad files.
+
+fn small_save(compress: bool) -> Vec<u8> {
+    let mut p = small_params(1_000, 21);
+    p.init.plates = 8;
+    let mut sim = Simulation::new(p).unwrap();
+    sim.run_steps(3).unwrap();
+    save::save_to_bytes_with(&mut sim, SaveOptions { compress })
+        .unwrap()
+        .0
+}
+
+fn load_err(bytes: &[u8]) -> save::LoadError {
+    save::load_from_bytes(bytes, Path::new("bad.planet"))
+        .err()
+        .expect("a bad save must be refused")
+}
+
+fn fix_checksum(b: &mut [u8]) {
+    if b.len() >= 32 {
+        let c = save::checksum(b);
+        b[24..28].copy_from_slice(&c.to_le_bytes());
+    }
+}
+
+#[test]
+fn every_kind_of_bad_file_gets_a_clear_error() {
+    let good = small_save(true);
+    assert!(save::load_from_bytes(&good, Path::new("good")).is_ok());
+    let check = |bytes: &[u8], ok: fn(&LoadErrorKind) -> bool, needle: &str| {
+        let e = load_err(bytes);
+        let msg = e.to_string();
+        assert!(ok(&e.kind), "unexpected error kind: {msg}");
+        assert!(msg.contains("bad.planet"), "{msg}");
+        assert!(msg.contains(needle), "{msg} lacks {needle:?}");
+    };
+    check(&[], |k| matches!(k, LoadErrorKind::Empty), "empty");
+    check(
+        b"GIF89a........................................",
+        |k| matches!(k, LoadErrorKind::BadMagic { .. }),
+        "not a planet save",
+    );
+    check(
+        &good[..20],
+        |k| matches!(k, LoadErrorKind::Truncated { .. }),
+        "truncated",
+    );
+    for cut in [good.len() / 3, good.len() - 1, 33] {
+        check(
+            &good[..cut],
+            |k| matches!(k, LoadErrorKind::Truncated { .. }),
+            "truncated",
+        );
+    }
+    let mut longer = good.clone();
+    longer.extend_from_slice(b"junk");
+    check(
+        &longer,
+        |k| matches!(k, LoadErrorKind::TrailingBytes { .. }),
+        "unexpected bytes",
+    );
+    let mut flipped = good.clone();
+    let at = good.len() / 2;
+    flipped[at] ^= 0x10;
+    check(
+        &flipped,
+        |k| matches!(k, LoadErrorKind::Checksum { .. }),
+        "corrupted",
+    );
+    let mut newer = good.clone();
+    newer[8..12].copy_from_slice(&(save::FORMAT_VERSION + 1).to_le_bytes());
+    fix_checksum(&mut newer);
+    check(
+        &newer,
+        |k| matches!(k, LoadErrorKind::NewerVersion { .. }),
+        "newer than this program reads",
+    );
+    let mut rng = SimRng::new(5, 5);
+    let random: Vec<u8> = (0..5000).map(|_| rng.next_u64() as u8).collect();
+    check(
+        &random,
+        |k| matches!(k, LoadErrorKind::BadMagic { .. }),
+        "not a planet save",
+    );
+    let mut random_after_magic = save::MAGIC.to_vec();
+    random_after_magic.extend_from_slice(&random);
+    let e = load_err(&random_after_magic);
+    assert!(!e.to_string().is_empty());
+
+    // A section claiming an absurd uncompressed size is refused before allocating.
+    let sections_start = save::HEADER_LEN;
+    let mut huge = good.clone();
+    let name_len = u16::from_le_bytes([huge[sections_start], huge[sections_start + 1]]) as usize;
+    let raw_len_at = sections_start + 2 + name_len + 4 + 1;
+    huge[raw_len_at..raw_len_at + 8].copy_from_slice(&u64::MAX.to_le_bytes());
+    fix_checksum(&mut huge);
+    check(
+        &huge,
+        |k| matches!(k, LoadErrorKind::Layout(_)),
+        "uncompressed bytes",
+    );
+
+    // Files on disk: missing, a directory, empty, a good one.
+    let dir = temp_dir("badfiles");
+    let missing = dir.join("missing.planet");
+    let e = save::load_from_file(&missing).err().unwrap();
+    assert!(matches!(e.kind, LoadErrorKind::Missing));
+    assert!(e.to_string().contains("missing.planet") && e.to_string().contains("no such file"));
+    let e = save::load_from_file(&dir).err().unwrap();
+    assert!(matches!(e.kind, LoadErrorKind::IsDirectory), "{e}");
+    assert!(e.to_string().contains("directory"));
+    let empty = dir.join("empty.planet");
+    std::fs::write(&empty, b"").unwrap();
+    let e = save::load_from_file(&empty).err().unwrap();
+    assert!(matches!(e.kind, LoadErrorKind::Empty), "{e}");
+}
+
+#[test]
+fn inconsistent_sections_are_refused() {
+    // Rebuild a save whose crust names a plate that does not exist: checksum fine, content bad.
+    let mut sim = Simulation::new(small_params(2_000, 8)).unwrap();
+    sim.world_mut().resource_mut::<Crust>().plate[17] = 9_999;
+    let bytes = save::save_to_bytes(&mut sim).unwrap();
+    let e = load_err(&bytes);
+    assert!(
+        e.to_string().contains("core.plates") && e.to_string().contains("9999"),
+        "{e}"
+    );
+    // A NaN in the crust.
+    let mut sim = Simulation::new(small_params(2_000, 8)).unwrap();
+    sim.world_mut().resource_mut::<Crust>().age_my[5] = f32::NAN;
+    let bytes = save::save_to_bytes(&mut sim).unwrap();
+    let e = load_err(&bytes);
+    assert!(e.to_string().contains("age_my"), "{e}");
+}
+
+/// Applies one random mutation; returns whether the checksum should be fixed afterwards.
+fn mutate(rng: &mut SimRng, b: &mut Vec<u8>) {
+    let n = b.len().max(1);
+    match rng.next_u64() % 7 {
+        0 => {
+            for _ in 0..1 + rng.next_u64() % 4 {
+                let i = (rng.next_u64() as usize) % n;
+                if i < b.len() {
+                    b[i] ^= 1 << (rng.next_u64() % 8);
+                }
+            }
+        }
+        1 => {
+            let i = (rng.next_u64() as usize) % n;
+            if i < b.len() {
+                b[i] = rng.next_u64() as u8;
+            }
+        }
+        2 => {
+            let i = (rng.next_u64() as usize) % n;
+            b.truncate(i);
+        }
+        3 => {
+            let i = (rng.next_u64() as usize) % n;
+            let v = match rng.next_u64() % 4 {
+                0 => u64::MAX,
+                1 => 0,
+                2 => f64::NAN.to_bits(),
+                _ => rng.next_u64(),
+            };
+            for (k, byte) in v.to_le_bytes().iter().enumerate() {
+                if i + k < b.len() {
+                    b[i + k] = *byte;
+                }
+            }
+        }
+        4 => {
+            let i = (rng.next_u64() as usize) % n;
+            let len = (rng.next_u64() as usize) % 64;
+            let end = (i + len).min(b.len());
+            if i <= end {
+                b.drain(i..end);
+            }
+        }
+        5 => {
+            let i = (rng.next_u64() as usize) % n;
+            let len = (rng.next_u64() as usize) % 64;
+            let end = (i + len).min(b.len());
+            if i <= end {
+                let piece: Vec<u8> = b[i..end].to_vec();
+                for (k, x) in piece.into_iter().enumerate() {
+                    b.insert(i + k, x);
+                }
+            }
+        }
+        _ => {
+            // A small u32 somewhere (counts and lengths are u32 or u64).
+            let i = (rng.next_u64() as usize) % n;
+            let v = (rng.next_u64() % 2000) as u32;
+            for (k, byte) in v.to_le_bytes().iter().enumerate() {
+                if i + k < b.len() {
+                    b[i + k] = *byte;
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn thousands_of_mutated_saves_never_panic() {
+    let raw = small_save(false);
+    let packed = small_save(true);
+    let mut rng = SimRng::new(2024, 9);
+    let (mut refused, mut accepted, mut deep) = (0, 0, 0);
+    for case in 0..3000u32 {
+        let base = if case % 5 == 0 { &packed } else { &raw };
+        let mut b = base.clone();
+        for _ in 0..1 + rng.next_u64() % 3 {
+            mutate(&mut rng, &mut b);
+        }
+        // Mostly keep the header consistent so that mutations reach the section decoders.
+        let fix = rng.next_u64() % 10 < 8;
+        if fix && b.len() >= save::HEADER_LEN {
+            let body = (b.len() - save::HEADER_LEN) as u64;
+            b[16..24].copy_from_slice(&body.to_le_bytes());
+            fix_checksum(&mut b);
+        }
+        let changed = b != *base;
+        let result = std::panic::catch_unwind(|| {
+            match save::load_from_bytes(&b, Path::new("mutant.planet")) {
+                Ok(mut sim) => {
+                    // Whatever was accepted must be a sane planet that can step.
+                    sim.crust().check_finite().unwrap();
+                    sim.step().map(|_| true).map_err(|e| e.to_string())
+                }
+                Err(e) => {
+                    let msg = e.to_string();
+                    assert!(msg.starts_with("save mutant.planet: ") && msg.len() > 25);
+                    Ok(false)
+                }
+            }
+        });
+        match result {
+            Err(_) => panic!("case {case} panicked (fix checksum: {fix})"),
+            Ok(Err(e)) => panic!("case {case}: a loaded mutant failed to step: {e}"),
+            Ok(Ok(true)) => accepted += 1,
+            Ok(Ok(false)) => {
+                refused += 1;
+                if fix {
+                    deep += 1;
+                }
+            }
+        }
+        if !fix && changed && b.len() >= save::HEADER_LEN {
+            // Without a fixed checksum every real change must be caught.
+            assert!(
+                save::load_from_bytes(&b, Path::new("m")).is_err(),
+                "case {case}: a damaged file was accepted"
+            );
+        }
+    }
+    println!("mutants: {refused} refused ({deep} past the checksum), {accepted} accepted");
+    assert!(
+        refused > 1000 && deep > 800,
+        "refused {refused}, deep {deep}"
+    );
+    assert!(
+        accepted > 0,
+        "some harmless mutations (in crust values) load"
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Compatibility fixture.
+
+/// Loads `saves/fixture-v1.planet`, written by the first version of the format. Every later
+/// version must still load it (or refuse it with a clear message if the format says so).
+#[test]
+fn the_version_1_fixture_still_loads() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("saves/fixture-v1.planet");
+    let mut sim = save::load_from_file(&path).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(sim.mesh().len(), 1_000);
+    assert_eq!(sim.params().planet.seed, 7);
+    assert_eq!(sim.clock().step, 5);
+    assert_ne!(sim.clock().steps_since_resample, 0, "saved mid-interval");
+    let history = sim.world().resource::<CommandHistory>().entries.clone();
+    assert_eq!(history.len(), 1);
+    assert!(history[0].1.contains("generate"), "{history:?}");
+    // The elevations are the ones written (hash of their bits, recorded when the fixture was
+    // made).
+    let mut h = tectonic_planets::random::StableHasher::default();
+    for z in &sim.crust().elevation_km {
+        h.write(&z.to_le_bytes());
+    }
+    assert_eq!(h.finish(), FIXTURE_ELEVATION_HASH);
+    sim.run_steps(3).unwrap();
+    assert_eq!(sim.clock().step, 8);
+}
+
+const FIXTURE_ELEVATION_HASH: u64 = 5760418113633258016;
+
+// ---------------------------------------------------------------------------------------------
+// Soak.
+
+fn rss_bytes(key: &str) -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with(key))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// 2000 steps at 50,000 samples, saving every 100 steps: no NaN (a step fails on one), and
+/// memory flat between step 200 and step 2000.
+#[test]
+#[ignore = "soak test (2000 steps at 50,000 samples): run with --ignored --nocapture"]
+fn soak_2000_steps_with_saves() {
+    let dir = temp_dir("soak");
+    let path = dir.join("soak.planet");
+    let mut sim = Simulation::new(params(50_000, 1)).unwrap();
+    let started = std::time::Instant::now();
+    let (mut rss_200, mut peak_200) = (0, 0);
+    for step in 1..=2000u64 {
+        sim.step().unwrap();
+        if step % 100 == 0 {
+            save::save_to_file(&mut sim, &path).unwrap();
+            let back = save::load_from_file(&path).unwrap();
+            assert_eq!(back.clock().step, step);
+            drop(back);
+            let rss = rss_bytes("VmRSS:").unwrap_or(0);
+            let peak = rss_bytes("VmHWM:").unwrap_or(0);
+            println!(
+                "step {step}: rss {:.1} MB, peak {:.1} MB, plates {}, land {:.3}, {:.1} s",
+                rss as f64 / 1e6,
+                peak as f64 / 1e6,
+                sim.stats().plates,
+                sim.stats().land_fraction,
+                started.elapsed().as_secs_f64()
+            );
+            if step == 200 {
+                (rss_200, peak_200) = (rss, peak);
+            }
+        }
+    }
+    sim.crust().check_finite().unwrap();
+    let rss = rss_bytes("VmRSS:").unwrap_or(0);
+    let peak = rss_bytes("VmHWM:").unwrap_or(0);
+    assert!(
+        rss as f64 <= 1.1 * rss_200 as f64 && peak as f64 <= 1.1 * peak_200 as f64,
+        "memory grew: rss {rss_200} -> {rss}, peak {peak_200} -> {peak}"
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Command line.
+
+fn planet() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_planet"))
+}
+
+fn cli_fails_with(args: &[&std::ffi::OsStr], needles: &[&str]) {
+    let out = planet().args(args).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{args:?} should fail: {stderr}");
+    assert!(!stderr.contains("panicked"), "{args:?} panicked: {stderr}");
+    for n in needles {
+        assert!(stderr.contains(n), "{args:?}: {stderr} lacks {n:?}");
+    }
+}
+
+#[test]
+fn generate_resume_export_from_the_command_line() {
+    let dir = temp_dir("cli");
+    let run = |args: Vec<std::ffi::OsString>| {
+        let out = planet().current_dir(&dir).args(&args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let common = [
+        "--samples",
+        "5000",
+        "--plates",
+        "10",
+        "--width",
+        "32",
+        "--quiet",
+    ];
+    let args = |extra: &[&str]| -> Vec<std::ffi::OsString> {
+        extra
+            .iter()
+            .chain(common.iter())
+            .map(|s| s.into())
+            .collect()
+    };
+    // 8 My with a save every 4 My into saves/, then 6 more My resumed into another file.
+    run(args(&[
+        "generate",
+        "--my",
+        "8",
+        "--out",
+        "o1",
+        "--save",
+        "a.planet",
+        "--save-every",
+        "4",
+    ]));
+    assert!(
+        dir.join("saves/a.planet").is_file(),
+        "bare names go to saves/"
+    );
+    let out = planet()
+        .current_dir(&dir)
+        .args([
+            "resume",
+            "saves/a.planet",
+            "--my",
+            "6",
+            "--save",
+            "b.planet",
+            "--out",
+            "o2",
+        ])
+        .args(["--width", "32", "--quiet"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    run(args(&[
+        "generate", "--my", "14", "--out", "o3", "--save", "c.planet",
+    ]));
+    let mut resumed = save::load_from_file(&dir.join("saves/b.planet")).unwrap();
+    let mut straight = save::load_from_file(&dir.join("saves/c.planet")).unwrap();
+    assert_eq!(resumed.clock().step, 7);
+    assert_eq!(
+        resumed.state_hash(),
+        straight.state_hash(),
+        "resume is exact"
+    );
+    let history = &resumed.world().resource::<CommandHistory>().entries;
+    assert_eq!(history.len(), 2, "{history:?}");
+    assert_eq!(history[1].0, 4);
+    assert!(history[1].1.contains("resume"));
+    // Maps from the resumed run, from the straight run and exported from the save agree.
+    let out = planet()
+        .current_dir(&dir)
+        .args([
+            "export",
+            "saves/b.planet",
+            "--out",
+            "o4",
+            "--width",
+            "32",
+            "--quiet",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let png = |d: &str| std::fs::read(dir.join(d).join("elevation.png")).unwrap();
+    assert_eq!(png("o2"), png("o3"));
+    assert_eq!(png("o2"), png("o4"));
+
+    // Bad save files and options, through the command line.
+    let text = dir.join("notes.txt");
+    std::fs::write(&text, "hello").unwrap();
+    let os = |s: &str| std::ffi::OsString::from(s);
+    cli_fails_with(
+        &[
+            &os("resume"),
+            dir.join("nope.planet").as_os_str(),
+            &os("--my"),
+            &os("2"),
+        ],
+        &["nope.planet", "no such file"],
+    );
+    cli_fails_with(&[&os("export"), dir.as_os_str()], &["directory"]);
+    cli_fails_with(
+        &[
+            &os("export"),
+            text.as_os_str(),
+            &os("--out"),
+            dir.join("o5").as_os_str(),
+        ],
+        &["notes.txt", "not a planet save"],
+    );
+    cli_fails_with(
+        &[
+            &os("resume"),
+            dir.join("saves/b.planet").as_os_str(),
+            &os("--my"),
+            &os("2"),
+            &os("--save-every"),
+            &os("0"),
+        ],
+        &["--save-every"],
+    );
+    cli_fails_with(
+        &[
+            &os("resume"),
+            dir.join("saves/b.planet").as_os_str(),
+            &os("--my"),
+            &os("nan"),
+        ],
+        &["--my"],
+    );
+}

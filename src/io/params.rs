@@ -1376,7 +1376,7 @@ mod tests {
     #[test]
     fn schema_is_consistent() {
         let schema = Params::schema();
-        assert_eq!(schema.len(), 37);
+        assert_eq!(schema.len(), 43);
         assert_eq!(schema.len(), BOUNDS.len());
         let mut seen = HashSet::new();
         for (spec, (lo, hi)) in schema.iter().zip(BOUNDS) {
@@ -1397,7 +1397,7 @@ mod tests {
             check_value(spec, (*lo, *hi), spec.default).unwrap();
         }
         assert_eq!(schema[0].key, "planet.radius_km");
-        assert_eq!(schema[36].key, "resample.fragment_min_area_km2");
+        assert_eq!(schema[42].key, "resample.fragment_min_area_km2");
         assert_eq!(SECTIONS.len(), 10);
     }
 

@@ -36,6 +36,7 @@
 //!   paper's Δ_c·A for small terranes, saturating at H = `collision.max_uplift_km` for
 //!   continents, since Δ_c·A alone gives tens of kilometres for a continent), with Himalayan
 //!   orogeny and fold directions pointing away from the terrane centroid.
+#![allow(clippy::needless_range_loop)]
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;
@@ -58,6 +59,7 @@ use crate::resources::{
 /// distance is measured to `origin(label)`; a sample is reached only if `allowed(sample,
 /// label)`; nothing farther than `max_rad`. Writes distances (radians) and labels of reached
 /// samples; others keep their values.
+#[allow(clippy::too_many_arguments)]
 pub fn propagate_nearest(
     mesh: &SphereMesh,
     seeds: &[(u32, u32)],
@@ -70,43 +72,50 @@ pub fn propagate_nearest(
 ) {
     settled.clear();
     settled.resize(mesh.len(), false);
+    // Order by chord length (monotone in the great-circle angle, and much cheaper); the angle is
+    // computed once per settled sample.
+    let chord = |a: DVec3, b: DVec3| (a - b).length();
+    let max_chord = 2.0 * (0.5 * max_rad.min(std::f64::consts::PI)).sin();
     let width = 0.5 * mesh.mean_spacing_rad();
-    let mut buckets: Vec<Vec<(u32, u32, f32)>> = Vec::new();
-    let push = |buckets: &mut Vec<Vec<(u32, u32, f32)>>, cur: usize, d: f64, node: u32, l: u32| {
-        let b = ((d / width) as usize).max(cur);
+    let mut buckets: Vec<Vec<(u32, u32)>> = Vec::new();
+    // Best chord offered to each sample so far: a worse offer is not queued.
+    let mut offered = vec![f32::INFINITY; mesh.len()];
+    let push = |buckets: &mut Vec<Vec<(u32, u32)>>, cur: usize, c: f64, node: u32, l: u32| {
+        let b = ((c / width) as usize).max(cur);
         if b >= buckets.len() {
             buckets.resize_with(b + 1, Vec::new);
         }
-        buckets[b].push((node, l, d as f32));
+        buckets[b].push((node, l));
     };
     for &(s, l) in seeds {
-        let d = angle_between(mesh.positions[s as usize], origin(l));
-        if d <= max_rad && allowed(s as usize, l) {
-            push(&mut buckets, 0, d, s, l);
+        let c = chord(mesh.positions[s as usize], origin(l));
+        if c <= max_chord && allowed(s as usize, l) {
+            push(&mut buckets, 0, c, s, l);
         }
     }
     let mut cur = 0;
     while cur < buckets.len() {
         let mut k = 0;
         while k < buckets[cur].len() {
-            let (node, l, d) = buckets[cur][k];
+            let (node, l) = buckets[cur][k];
             k += 1;
             let n = node as usize;
             if settled[n] {
                 continue;
             }
             settled[n] = true;
-            dist_rad[n] = d;
-            label[n] = l;
             let o = origin(l);
+            dist_rad[n] = angle_between(mesh.positions[n], o) as f32;
+            label[n] = l;
             for &h in mesh.neighbors_of(n) {
                 let h = h as usize;
                 if settled[h] || !allowed(h, l) {
                     continue;
                 }
-                let dh = angle_between(mesh.positions[h], o);
-                if dh <= max_rad {
-                    push(&mut buckets, cur, dh, h as u32, l);
+                let c = chord(mesh.positions[h], o);
+                if c <= max_chord && (c as f32) < offered[h] {
+                    offered[h] = c as f32;
+                    push(&mut buckets, cur, c, h as u32, l);
                 }
             }
         }
@@ -145,6 +154,7 @@ struct ConvergingEdge {
 /// [`FrontPoints`], [`ConvergenceField`] and [`OverridePairs`] and respawns the
 /// [`SubductionFront`] entities.
 pub fn build_fronts(world: &mut World) {
+    let _timer = crate::systems::DebugTimer::new("build_fronts");
     let table = {
         let mut q = world.query::<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>();
         PlateTable::from_plates(q.iter(world).map(|(p, m, f, b, s)| (*p, *m, *f, *b, *s)))
@@ -193,6 +203,8 @@ pub fn build_fronts(world: &mut World) {
         })
         .collect();
 
+    tracing::debug!(edges = edges.len(), "converging edges");
+    let _t_runs = crate::systems::DebugTimer::new("front runs and points");
     // 2. Runs: edges of the same plate pair sharing a vertex.
     let mut parent: Vec<usize> = (0..edges.len()).collect();
     fn find(p: &mut [usize], mut x: usize) -> usize {
@@ -317,6 +329,7 @@ pub fn build_fronts(world: &mut World) {
     pairs.sort_unstable();
     pairs.dedup();
 
+    drop(_t_runs);
     // 4. Distance fields.
     let mut field = world
         .remove_resource::<ConvergenceField>()
@@ -331,7 +344,6 @@ pub fn build_fronts(world: &mut World) {
     field.subducting_distance_km.resize(n, f32::INFINITY);
     field.subducting_point.clear();
     field.subducting_point.resize(n, NONE);
-    let mut settled = Vec::new();
     let over_seeds: Vec<(u32, u32)> = fp
         .sample
         .iter()
@@ -339,30 +351,48 @@ pub fn build_fronts(world: &mut World) {
         .map(|(k, &s)| (s, k as u32))
         .collect();
     let origin = |l: u32| mesh.positions[fp.sample[l as usize] as usize];
-    propagate_nearest(
-        mesh,
-        &over_seeds,
-        origin,
-        |s, l| crust.plate[s] == fp.overriding[l as usize],
-        params.subduction.distance_km / r_km,
-        &mut field.overriding_distance_km,
-        &mut field.overriding_point,
-        &mut settled,
-    );
-    let sub_limit = (2.0 * params.resample.adaptive_displacement_km
+    // The subducting side is followed as far as the fastest plate can carry crust to the front
+    // before the next resampling, plus the collision threshold and the trench.
+    let sub_limit = (params.resample.adaptive_displacement_km
         + params.collision.interpenetration_km
         + params.subduction.trench_width_km)
         / r_km;
-    propagate_nearest(
-        mesh,
-        &sub_seeds,
-        origin,
-        |s, l| crust.plate[s] == fp.subducting[l as usize],
-        sub_limit,
-        &mut field.subducting_distance_km,
-        &mut field.subducting_point,
-        &mut settled,
-    );
+    {
+        let _t = crate::systems::DebugTimer::new("front distance fields");
+        let ConvergenceField {
+            overriding_distance_km,
+            overriding_point,
+            subducting_distance_km,
+            subducting_point,
+        } = &mut field;
+        let fp = &fp;
+        rayon::join(
+            || {
+                propagate_nearest(
+                    mesh,
+                    &over_seeds,
+                    origin,
+                    |s, l| crust.plate[s] == fp.overriding[l as usize],
+                    params.subduction.distance_km / r_km,
+                    overriding_distance_km,
+                    overriding_point,
+                    &mut Vec::new(),
+                )
+            },
+            || {
+                propagate_nearest(
+                    mesh,
+                    &sub_seeds,
+                    origin,
+                    |s, l| crust.plate[s] == fp.subducting[l as usize],
+                    sub_limit,
+                    subducting_distance_km,
+                    subducting_point,
+                    &mut Vec::new(),
+                )
+            },
+        );
+    }
     for d in field
         .overriding_distance_km
         .iter_mut()
@@ -393,6 +423,7 @@ pub fn build_fronts(world: &mut World) {
 /// continent, from the shore inward. Without this, such slivers stay as pits kilometres deep in
 /// the middle of mountain belts.
 pub fn close_trapped_ocean(world: &mut World) {
+    let _timer = crate::systems::DebugTimer::new("close_trapped_ocean");
     let limit = world.resource::<Params>().collision.trapped_ocean_km2;
     if limit <= 0.0 {
         return;
@@ -470,6 +501,7 @@ pub fn close_trapped_ocean(world: &mut World) {
 /// Rebuilds the terranes: connected continental regions within each plate, as entities and as
 /// the per-sample [`TerraneField`].
 pub fn build_terranes(world: &mut World) {
+    let _timer = crate::systems::DebugTimer::new("build_terranes");
     let mesh = world.resource::<SphereMesh>();
     let crust = world.resource::<Crust>();
     let n = mesh.len();

@@ -8,3 +8,29 @@ pub mod erosion;
 pub mod init;
 pub mod oceanic_crust;
 pub mod resample;
+
+/// Logs the wall time of a scope at debug level when dropped.
+pub struct DebugTimer {
+    name: &'static str,
+    start: std::time::Instant,
+}
+
+impl DebugTimer {
+    /// Starts timing `name`.
+    pub fn new(name: &'static str) -> Self {
+        Self {
+            name,
+            start: std::time::Instant::now(),
+        }
+    }
+}
+
+impl Drop for DebugTimer {
+    fn drop(&mut self) {
+        tracing::debug!(
+            ms = self.start.elapsed().as_secs_f64() * 1e3,
+            "{}",
+            self.name
+        );
+    }
+}

@@ -13,6 +13,7 @@
 //! Core beats fringe; among cores (two plates overlapping), the plate order decides which one
 //! stays on top (Driftworld §3.5, by overlap score). With every plate at rest, each sample is the
 //! nearest vertex of its own triangle, so resampling is exactly the identity.
+#![allow(clippy::needless_range_loop)]
 
 use std::time::Instant;
 

@@ -4,6 +4,12 @@
 use tectonic_planets::prelude::*;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
+    if let Ok(f) = tracing_subscriber::EnvFilter::try_from_env("PLANET_LOG") {
+        tracing_subscriber::fmt()
+            .with_env_filter(f)
+            .with_writer(std::io::stderr)
+            .init();
+    }
     let args: Vec<u64> = std::env::args()
         .skip(1)
         .filter_map(|a| a.parse().ok())

@@ -337,3 +337,52 @@ fn slab_pull_turns_the_pole_toward_the_front() {
         "pole did not turn toward the front: {pole0:?} -> {with:?}, expected toward {e:?}"
     );
 }
+
+/// The default planet (40 plates, continental fraction 0.3) over 500 steps (1000 My), five
+/// seeds, at 100,000 samples: continental area within ±10% of its start, land fraction between
+/// 0.2 and 0.45 throughout, no elevation above z_c (plus rounding), no NaN (a step returns an
+/// error on one), and every plate in one piece after its last resampling.
+#[test]
+fn default_planet_over_1000_my_keeps_its_continents() {
+    for seed in 1..=5 {
+        let mut sim = Simulation::new(params(100_000, seed)).unwrap();
+        let mesh = sim.mesh().clone();
+        let c0 = sim.stats().continental_fraction;
+        let z_c = sim.params().continent.max_elevation_km as f32;
+        for step in 1..=500 {
+            sim.step().unwrap();
+            let s = sim.stats();
+            let change = (s.continental_fraction - c0).abs() / c0;
+            assert!(
+                change <= 0.10,
+                "seed {seed}, step {step}: continental area changed by {:.1}%",
+                100.0 * change
+            );
+            assert!(
+                (0.2..=0.45).contains(&s.land_fraction),
+                "seed {seed}, step {step}: land fraction {}",
+                s.land_fraction
+            );
+            assert!(
+                s.elevation_range_km.1 <= z_c + 0.01,
+                "seed {seed}, step {step}: elevation {} km",
+                s.elevation_range_km.1
+            );
+        }
+        sim.request_resample();
+        sim.step().unwrap();
+        let crust = sim.crust().clone();
+        for p in sim.plate_table().plates {
+            let total = area_where(&mesh, |i| crust.plate[i] == p.id);
+            let largest = components(&mesh, |i| crust.plate[i] == p.id, |_, _| true)
+                .iter()
+                .map(|c| c.iter().map(|&i| mesh.area_km2[i]).sum::<f64>())
+                .fold(0.0, f64::max);
+            assert!(
+                total > 0.0 && largest >= 0.99 * total,
+                "seed {seed}: plate {} in pieces",
+                p.id
+            );
+        }
+    }
+}

@@ -442,6 +442,68 @@ pub fn interpolate(
         });
 }
 
+/// Continental crust is never destroyed: where a plate's continental crust went under another
+/// plate's continental crust (counted in [`SampleSource::continental_lost`]), the crust on top
+/// takes the place, and as many oceanic samples of the same plate as were overridden, the ones
+/// closest to the overlap (breadth-first through the plate), become continental with the
+/// elevation and orogeny of the crust next to them: the thickened crust of the orogen spreads
+/// outward instead of vanishing. Deterministic (plates by id, samples in index order).
+pub fn displace_overridden_continents(
+    mesh: &SphereMesh,
+    params: &Params,
+    sources: &[SampleSource],
+    next: &mut Crust,
+) {
+    let thickness = params.init.continental_thickness_km as f32;
+    let mut by_plate: std::collections::BTreeMap<u32, Vec<u32>> = std::collections::BTreeMap::new();
+    for (j, src) in sources.iter().enumerate() {
+        if src.continental_lost && next.plate[j] != NO_PLATE {
+            by_plate.entry(next.plate[j]).or_default().push(j as u32);
+        }
+    }
+    if by_plate.is_empty() {
+        return;
+    }
+    let mut visited = vec![false; mesh.len()];
+    let (mut lost, mut moved) = (0usize, 0usize);
+    for (plate, starts) in by_plate {
+        let mut debt = starts.len();
+        lost += debt;
+        let mut queue: std::collections::VecDeque<u32> = starts.iter().copied().collect();
+        for &s in &starts {
+            visited[s as usize] = true;
+        }
+        while let Some(u) = queue.pop_front() {
+            if debt == 0 {
+                break;
+            }
+            let u = u as usize;
+            for &v in mesh.neighbors_of(u) {
+                let v = v as usize;
+                if visited[v] || next.plate[v] != plate {
+                    continue;
+                }
+                visited[v] = true;
+                if next.crust_type[v] == CrustType::Oceanic
+                    && debt > 0
+                    && next.crust_type[u] == CrustType::Continental
+                {
+                    next.crust_type[v] = CrustType::Continental;
+                    next.elevation_km[v] = next.elevation_km[u].max(0.0);
+                    next.thickness_km[v] = thickness;
+                    next.orogeny[v] = next.orogeny[u];
+                    next.orogeny_age_my[v] = next.orogeny_age_my[u];
+                    next.fold_dir[v] = next.fold_dir[u];
+                    debt -= 1;
+                    moved += 1;
+                }
+                queue.push_back(v as u32);
+            }
+        }
+    }
+    tracing::debug!(lost, moved, "overridden continental samples displaced");
+}
+
 /// For every gap sample, the nearest covered sample of the nearest plate and of the nearest other
 /// plate. Labels spread from the covered samples bordering the gaps through the gap samples in
 /// order of true great-circle distance to their seed (never hop counts), two labels of distinct
@@ -813,6 +875,7 @@ pub fn resample_interpolate(
         s.applied = pending.into_iter().zip(moved).collect();
     }
     interpolate(&mesh, &crust, &table, &work.sources, &mut work.next);
+    displace_overridden_continents(&mesh, &params, &work.sources, &mut work.next);
     lap("interpolate", &mut t);
     let gap_ids: Vec<u32> = work
         .sources

@@ -531,6 +531,13 @@ fn bench(a: BenchArgs) -> Result<()> {
         "one resampling (median)",
         sim.timings().median_ms("resampling").unwrap_or(f64::NAN)
     );
+    println!(
+        "{:<28} {:>10.1} ms",
+        "  + fronts, terranes (median)",
+        sim.timings()
+            .median_ms("after_resample")
+            .unwrap_or(f64::NAN)
+    );
     let state = sim.state_bytes();
     println!(
         "{:<28} {:>10.1} MB  ({:.0} bytes/sample)",

@@ -933,12 +933,17 @@ pub fn resample_rebuild(world: &mut World) {
         clock.resamplings += 1;
     }
     world.resource_mut::<ResampleRequest>().0 = false;
-    let _ = world.try_run_schedule(crate::plugins::AfterResample);
     if let Some(t0) = started {
         world
             .resource_mut::<StepTimings>()
             .record("resampling", t0.elapsed());
     }
+    // Fronts, terranes and collision uplift, rebuilt on the new crust (timed apart).
+    let t_after = Instant::now();
+    let _ = world.try_run_schedule(crate::plugins::AfterResample);
+    world
+        .resource_mut::<StepTimings>()
+        .record("after_resample", t_after.elapsed());
 }
 
 /// Brings plate entities in line with `Crust::plate`: updates mesh, bounds and stats, despawns

@@ -90,17 +90,7 @@ impl Simulation {
         app.cleanup();
         let world = app.world_mut();
         for p in &plates {
-            world.spawn((
-                Plate { id: p.id },
-                p.motion,
-                PlateFrame::default(),
-                PlateMesh::default(),
-                PlateBounds {
-                    centroid: glam::DVec3::Z,
-                    cap_radius_rad: std::f64::consts::PI,
-                },
-                PlateStats::default(),
-            ));
+            world.spawn(Plate::bundle(p.id, p.motion));
         }
         resample::rebuild_plate_entities(world, &[]);
         let _ = world.try_run_schedule(crate::plugins::AfterResample);
@@ -283,28 +273,10 @@ impl Simulation {
             )));
         }
         let world = self.app.world_mut();
-        let old: Vec<Entity> = world
-            .query_filtered::<Entity, With<Plate>>()
-            .iter(world)
-            .collect();
-        for e in old {
-            world.despawn(e);
-        }
+        Plate::despawn_all(world);
         world.resource_mut::<Crust>().plate = plate_of_sample;
         for &(id, motion) in motions {
-            world.spawn((
-                Plate {
-                    id: crate::components::PlateId(id),
-                },
-                motion,
-                PlateFrame::default(),
-                PlateMesh::default(),
-                PlateBounds {
-                    centroid: glam::DVec3::Z,
-                    cap_radius_rad: std::f64::consts::PI,
-                },
-                PlateStats::default(),
-            ));
+            world.spawn(Plate::bundle(crate::components::PlateId(id), motion));
         }
         let next = ids
             .last()

@@ -17,6 +17,35 @@ pub struct Plate {
     pub id: PlateId,
 }
 
+impl Plate {
+    /// Every component of a new plate entity with this id and motion, at the identity frame,
+    /// with empty geometry (filled by the next plate rebuild).
+    pub fn bundle(id: PlateId, motion: PlateMotion) -> impl Bundle {
+        (
+            Plate { id },
+            motion,
+            PlateFrame::default(),
+            PlateMesh::default(),
+            PlateBounds {
+                centroid: DVec3::Z,
+                cap_radius_rad: std::f64::consts::PI,
+            },
+            PlateStats::default(),
+        )
+    }
+
+    /// Despawns every plate entity.
+    pub fn despawn_all(world: &mut World) {
+        let old: Vec<Entity> = world
+            .query_filtered::<Entity, With<Plate>>()
+            .iter(world)
+            .collect();
+        for e in old {
+            world.despawn(e);
+        }
+    }
+}
+
 /// Rigid geodetic movement of a plate: rotation about an Euler pole through the planet centre.
 /// The surface velocity at unit position `p` is `ω w × p` (times the radius for km/My = mm/yr).
 #[derive(Component, Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -921,13 +921,7 @@ fn load_plates(world: &mut World, r: &mut SectionReader, _v: u32) -> Result<(), 
             "sample {i} belongs to plate {p}, which does not exist"
         ));
     }
-    let old: Vec<Entity> = world
-        .query_filtered::<Entity, With<Plate>>()
-        .iter(world)
-        .collect();
-    for e in old {
-        world.despawn(e);
-    }
+    Plate::despawn_all(world);
     for p in plates {
         world.spawn(p);
     }

@@ -834,63 +834,64 @@ pub fn find_collisions(
     any
 }
 
-/// Collision detection at the start of a step (threshold `collision.interpenetration_km`).
-#[allow(clippy::too_many_arguments)]
+/// What the collision checks read.
+#[derive(bevy_ecs::system::SystemParam)]
+pub struct CollisionInputs<'w, 's> {
+    mesh: Res<'w, SphereMesh>,
+    params: Res<'w, Params>,
+    crust: Res<'w, Crust>,
+    fp: Res<'w, FrontPoints>,
+    field: Res<'w, ConvergenceField>,
+    terranes: Res<'w, TerraneField>,
+    plates: Query<
+        'w,
+        's,
+        (
+            &'static Plate,
+            &'static PlateMotion,
+            &'static PlateFrame,
+            &'static PlateBounds,
+            &'static PlateStats,
+        ),
+    >,
+}
+
+impl CollisionInputs<'_, '_> {
+    fn find(&self, threshold_km: f64, lookahead_my: f64, sutures: &mut Sutures) -> bool {
+        let table = PlateTable::from_query(&self.plates);
+        find_collisions(
+            threshold_km,
+            lookahead_my,
+            &self.mesh,
+            &self.params,
+            &self.crust,
+            &self.fp,
+            &self.field,
+            &self.terranes,
+            &table,
+            sutures,
+        )
+    }
+}
+
+/// Collision detection at the start of a step (threshold `collision.interpenetration_km`,
+/// looking one step ahead); asks for a resampling when a collision fires.
 pub fn detect_collisions(
-    mesh: Res<SphereMesh>,
-    params: Res<Params>,
-    crust: Res<Crust>,
-    fp: Res<FrontPoints>,
-    field: Res<ConvergenceField>,
-    terranes: Res<TerraneField>,
-    plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
+    inputs: CollisionInputs,
     mut sutures: ResMut<Sutures>,
     mut request: ResMut<ResampleRequest>,
 ) {
-    let table = PlateTable::from_query(&plates);
-    let t = params.collision.interpenetration_km;
-    if find_collisions(
-        t,
-        params.time.time_step_my,
-        &mesh,
-        &params,
-        &crust,
-        &fp,
-        &field,
-        &terranes,
-        &table,
-        &mut sutures,
-    ) {
+    let t = inputs.params.collision.interpenetration_km;
+    let ahead = inputs.params.time.time_step_my;
+    if inputs.find(t, ahead, &mut sutures) {
         request.0 = true;
     }
 }
 
 /// Just before a resampling: any continental crust already under another plate's continental
 /// crust collides now, whatever its depth, so the resampling drops none of it.
-#[allow(clippy::too_many_arguments)]
-pub fn collide_before_resample(
-    mesh: Res<SphereMesh>,
-    params: Res<Params>,
-    crust: Res<Crust>,
-    fp: Res<FrontPoints>,
-    field: Res<ConvergenceField>,
-    terranes: Res<TerraneField>,
-    plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
-    mut sutures: ResMut<Sutures>,
-) {
-    let table = PlateTable::from_query(&plates);
-    find_collisions(
-        0.0,
-        0.0,
-        &mesh,
-        &params,
-        &crust,
-        &fp,
-        &field,
-        &terranes,
-        &table,
-        &mut sutures,
-    );
+pub fn collide_before_resample(inputs: CollisionInputs, mut sutures: ResMut<Sutures>) {
+    inputs.find(0.0, 0.0, &mut sutures);
 }
 
 /// After a resampling that applied sutures: the collision surge around each sutured terrane.

@@ -20,8 +20,9 @@
 //!   since the trench is made on the subducting side), g = v/v0 and h = z̃², z̃ the normalised
 //!   elevation of the subducting crust now at the front point (located in the subducting plate
 //!   every step). Elevations are capped at z_c. Uplifted crust above sea level gets Andean
-//!   orogeny with its age reset, and emerged oceanic crust (an island arc) becomes continental
-//!   crust, the way continents grow at arcs; fold directions take β·(s_sub − s_over)·δt.
+//!   orogeny with its age reset (island arcs stay oceanic crust: turning emerged arcs into
+//!   continental crust grew the default planet's continents by 13% per 1000 My at 500,000
+//!   samples); fold directions take β·(s_sub − s_over)·δt.
 //! - **Trench**: oceanic crust of the subducting plate within `subduction.trench_width_km` of the
 //!   front deepens toward a profile from z_t at the front to z_a at the trench edge.
 //! - **Slab pull**: w ← normalise(w + 0.01·ε·Σ_k (c × q_k)/|c × q_k|·(ℓ_k/R)·δt) over the active
@@ -636,7 +637,7 @@ pub fn subduction_uplift(
         crust.orogeny.par_iter_mut(),
         crust.orogeny_age_my.par_iter_mut(),
         crust.fold_dir.par_iter_mut(),
-        crust.crust_type.par_iter_mut(),
+        crust.crust_type.par_iter(),
         field.overriding_distance_km.par_iter(),
         field.overriding_point.par_iter(),
         field.subducting_distance_km.par_iter(),
@@ -661,9 +662,6 @@ pub fn subduction_uplift(
                     if znew > 0.0 && u * dt > 1e-4 {
                         *og = Orogeny::Andean;
                         *oga = 0.0;
-                        // An island arc that emerges is new continental crust: it will resist
-                        // subduction and accrete as a terrane (paper Fig. 15).
-                        *ct = CrustType::Continental;
                     }
                     let f = rel * (beta * dt);
                     fold[0] += f.x as f32;

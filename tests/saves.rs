@@ -911,3 +911,51 @@ fn generate_resume_export_from_the_command_line() {
         &["--my"],
     );
 }
+
+/// The convergence section round-trips whatever it holds: terranes with no subduction front at
+/// all (plates at rest), and fronts with their per-step state.
+#[test]
+fn convergence_state_round_trips_with_and_without_fronts() {
+    use tectonic_planets::resources::{ConvergenceField, FrontPoints, TerraneField};
+    // Plates at rest: terranes, no fronts.
+    let mut sim = Simulation::new(small_params(8_000, 3)).unwrap();
+    let ids: Vec<u32> = sim.plate_table().plates.iter().map(|p| p.id).collect();
+    for id in ids {
+        sim.set_plate_motion(
+            id,
+            PlateMotion {
+                euler_pole: glam::DVec3::Z,
+                angular_speed_rad_per_my: 0.0,
+            },
+        )
+        .unwrap();
+    }
+    sim.request_resample();
+    sim.step().unwrap();
+    assert!(sim.world().resource::<FrontPoints>().is_empty());
+    assert!(!sim.world().resource::<TerraneField>().area_km2.is_empty());
+    let mut back = round_trip(&mut sim);
+    assert_eq!(
+        back.world().resource::<TerraneField>().area_km2,
+        sim.world().resource::<TerraneField>().area_km2
+    );
+    assert_eq!(back.state_hash(), sim.state_hash());
+    // A moving planet: fronts with state, restored bit for bit.
+    let mut sim = Simulation::new(small_params(8_000, 4)).unwrap();
+    sim.run_steps(3).unwrap();
+    assert!(!sim.world().resource::<FrontPoints>().is_empty());
+    let back = round_trip(&mut sim);
+    let (a, b) = (
+        sim.world().resource::<FrontPoints>(),
+        back.world().resource::<FrontPoints>(),
+    );
+    assert_eq!(a.sample, b.sample);
+    assert_eq!(a.converged_km, b.converged_km);
+    assert_eq!(a.active, b.active);
+    let (fa, fb) = (
+        sim.world().resource::<ConvergenceField>(),
+        back.world().resource::<ConvergenceField>(),
+    );
+    assert_eq!(fa.overriding_point, fb.overriding_point);
+    assert_eq!(fa.subducting_distance_km, fb.subducting_distance_km);
+}

@@ -1625,7 +1625,7 @@ fn load_convergence(world: &mut World, r: &mut SectionReader, _v: u32) -> Result
     let total = r.u64()?;
     let subducted = r.finite_f64("subducted continental area")?;
     let nter = r.u32()? as usize;
-    if r.remaining() < nter.saturating_mul(48) {
+    if r.remaining() < nter.saturating_mul(44) {
         return Err("terranes are truncated".into());
     }
     let mut terranes = Vec::with_capacity(nter);

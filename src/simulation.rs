@@ -311,7 +311,9 @@ impl Simulation {
 
     /// The crust as it would be after a resampling now, without changing the simulation: every
     /// field on the reference mesh in the world frame, gaps filled with new ocean floor (when the
-    /// `oceanic_crust` phenomenon is on). This is what maps and exports show.
+    /// `oceanic_crust` phenomenon is on). This is what maps and exports show. (Unlike a real
+    /// resampling it applies no pending suture and does not displace continental crust overridden
+    /// by another continent; both only move a few samples near active collisions.)
     pub fn resampled_crust(&mut self) -> Crust {
         let table = self.plate_table();
         let ocean_on = self
@@ -349,23 +351,7 @@ impl Simulation {
         resample::fill_gaps_from_nearest(&mut next, &gaps);
         if ocean_on {
             let elapsed = clock.steps_since_resample as f64 * params.time.time_step_my;
-            let made: Vec<_> = gaps
-                .iter()
-                .map(|g| oceanic_crust::ridge_crust(mesh, params, &next.elevation_km, elapsed, g))
-                .collect();
-            for (g, m) in gaps.iter().zip(made) {
-                if let Some((z, age, ridge)) = m {
-                    let j = g.sample as usize;
-                    next.elevation_km[j] = z;
-                    next.age_my[j] = age;
-                    next.ridge_dir[j] = ridge;
-                    next.crust_type[j] = crate::resources::CrustType::Oceanic;
-                    next.thickness_km[j] = params.init.oceanic_thickness_km as f32;
-                    next.orogeny[j] = crate::resources::Orogeny::None;
-                    next.orogeny_age_my[j] = 0.0;
-                    next.fold_dir[j] = [0.0; 3];
-                }
-            }
+            oceanic_crust::fill_ridge_crust(mesh, params, elapsed, &gaps, &mut next);
         }
         let mut next_id = world.resource::<NextPlateId>().0;
         resample::defragment_plates(

@@ -22,7 +22,7 @@ use rayon::prelude::*;
 
 use crate::geometry::SphereMesh;
 use crate::io::params::Params;
-use crate::resources::{CrustType, Orogeny};
+use crate::resources::{Crust, CrustType, Orogeny};
 use crate::systems::resample::{GapSample, ResampleWork};
 
 /// Elevation of ocean floor that formed at the ridge `age_my` ago: the exact solution of the
@@ -107,14 +107,23 @@ pub fn generate_oceanic_crust(
         return;
     }
     let work = &mut *work;
-    let made: Vec<Option<(f32, f32, [f32; 3])>> = work
-        .gaps
+    fill_ridge_crust(&mesh, &params, work.elapsed_my, &work.gaps, &mut work.next);
+}
+
+/// Writes new ridge crust into every gap sample of `next` (gaps opened over `elapsed_my`).
+pub fn fill_ridge_crust(
+    mesh: &SphereMesh,
+    params: &Params,
+    elapsed_my: f64,
+    gaps: &[GapSample],
+    next: &mut Crust,
+) {
+    let made: Vec<Option<(f32, f32, [f32; 3])>> = gaps
         .par_iter()
-        .map(|g| ridge_crust(&mesh, &params, &work.next.elevation_km, work.elapsed_my, g))
+        .map(|g| ridge_crust(mesh, params, &next.elevation_km, elapsed_my, g))
         .collect();
     let thickness = params.init.oceanic_thickness_km as f32;
-    let next = &mut work.next;
-    for (g, m) in work.gaps.iter().zip(made) {
+    for (g, m) in gaps.iter().zip(made) {
         let Some((z, age, ridge)) = m else { continue };
         let j = g.sample as usize;
         next.elevation_km[j] = z;

@@ -47,7 +47,7 @@ use crate::components::{
     FrontKind, Plate, PlateBounds, PlateFrame, PlateId, PlateMotion, PlateStats, SubductionFront,
     Terrane,
 };
-use crate::geometry::{SphereMesh, angle_between};
+use crate::geometry::SphereMesh;
 use crate::io::params::Params;
 use crate::resources::convergence::NONE;
 use crate::resources::{
@@ -73,20 +73,20 @@ pub fn propagate_nearest(
 ) {
     settled.clear();
     settled.resize(mesh.len(), false);
-    // Order by chord length (monotone in the great-circle angle, and much cheaper); the angle is
-    // computed once per settled sample.
+    // Order by chord length (monotone in the great-circle angle, and much cheaper); chords are
+    // turned into angles once at the end.
     let chord = |a: DVec3, b: DVec3| (a - b).length();
     let max_chord = 2.0 * (0.5 * max_rad.min(std::f64::consts::PI)).sin();
     let width = 0.5 * mesh.mean_spacing_rad();
-    let mut buckets: Vec<Vec<(u32, u32)>> = Vec::new();
+    let mut buckets: Vec<Vec<(u32, u32, f32)>> = Vec::new();
     // Best chord offered to each sample so far: a worse offer is not queued.
     let mut offered = vec![f32::INFINITY; mesh.len()];
-    let push = |buckets: &mut Vec<Vec<(u32, u32)>>, cur: usize, c: f64, node: u32, l: u32| {
+    let push = |buckets: &mut Vec<Vec<(u32, u32, f32)>>, cur: usize, c: f64, node: u32, l: u32| {
         let b = ((c / width) as usize).max(cur);
         if b >= buckets.len() {
             buckets.resize_with(b + 1, Vec::new);
         }
-        buckets[b].push((node, l));
+        buckets[b].push((node, l, c as f32));
     };
     for &(s, l) in seeds {
         let c = chord(mesh.positions[s as usize], origin(l));
@@ -94,20 +94,22 @@ pub fn propagate_nearest(
             push(&mut buckets, 0, c, s, l);
         }
     }
+    let mut reached: Vec<u32> = Vec::new();
     let mut cur = 0;
     while cur < buckets.len() {
         let mut k = 0;
         while k < buckets[cur].len() {
-            let (node, l) = buckets[cur][k];
+            let (node, l, c) = buckets[cur][k];
             k += 1;
             let n = node as usize;
             if settled[n] {
                 continue;
             }
             settled[n] = true;
-            let o = origin(l);
-            dist_rad[n] = angle_between(mesh.positions[n], o) as f32;
+            dist_rad[n] = c;
             label[n] = l;
+            reached.push(node);
+            let o = origin(l);
             for &h in mesh.neighbors_of(n) {
                 let h = h as usize;
                 if settled[h] || !allowed(h, l) {
@@ -122,6 +124,10 @@ pub fn propagate_nearest(
         }
         buckets[cur] = Vec::new();
         cur += 1;
+    }
+    for &n in &reached {
+        let c = dist_rad[n as usize] as f64;
+        dist_rad[n as usize] = (2.0 * (0.5 * c).min(1.0).asin()) as f32;
     }
 }
 

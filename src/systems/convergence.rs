@@ -73,15 +73,26 @@ pub fn propagate_nearest(
 ) {
     settled.clear();
     settled.resize(mesh.len(), false);
-    // Order by chord length (monotone in the great-circle angle, and much cheaper); chords are
-    // turned into angles once at the end.
+    // Ordered by chord length (monotone in the great-circle angle, and much cheaper). While the
+    // search runs, `dist_rad` holds the best chord offered so far (a worse offer is not queued)
+    // and `label` its front point; chords become angles at the end.
     let chord = |a: DVec3, b: DVec3| (a - b).length();
     let max_chord = 2.0 * (0.5 * max_rad.min(std::f64::consts::PI)).sin();
     let width = 0.5 * mesh.mean_spacing_rad();
     let mut buckets: Vec<Vec<(u32, u32, f32)>> = Vec::new();
-    // Best chord offered to each sample so far: a worse offer is not queued.
-    let mut offered = vec![f32::INFINITY; mesh.len()];
-    let push = |buckets: &mut Vec<Vec<(u32, u32, f32)>>, cur: usize, c: f64, node: u32, l: u32| {
+    let offer = |buckets: &mut Vec<Vec<(u32, u32, f32)>>,
+                 dist: &mut [f32],
+                 lab: &mut [u32],
+                 cur: usize,
+                 c: f64,
+                 node: u32,
+                 l: u32| {
+        let n = node as usize;
+        if c > max_chord || (c as f32) >= dist[n] {
+            return;
+        }
+        dist[n] = c as f32;
+        lab[n] = l;
         let b = ((c / width) as usize).max(cur);
         if b >= buckets.len() {
             buckets.resize_with(b + 1, Vec::new);
@@ -89,12 +100,11 @@ pub fn propagate_nearest(
         buckets[b].push((node, l, c as f32));
     };
     for &(s, l) in seeds {
-        let c = chord(mesh.positions[s as usize], origin(l));
-        if c <= max_chord && allowed(s as usize, l) {
-            push(&mut buckets, 0, c, s, l);
+        if allowed(s as usize, l) {
+            let c = chord(mesh.positions[s as usize], origin(l));
+            offer(&mut buckets, dist_rad, label, 0, c, s, l);
         }
     }
-    let mut reached: Vec<u32> = Vec::new();
     let mut cur = 0;
     while cur < buckets.len() {
         let mut k = 0;
@@ -102,13 +112,10 @@ pub fn propagate_nearest(
             let (node, l, c) = buckets[cur][k];
             k += 1;
             let n = node as usize;
-            if settled[n] {
-                continue;
+            if settled[n] || label[n] != l || c > dist_rad[n] {
+                continue; // settled already, or a better offer came later
             }
             settled[n] = true;
-            dist_rad[n] = c;
-            label[n] = l;
-            reached.push(node);
             let o = origin(l);
             for &h in mesh.neighbors_of(n) {
                 let h = h as usize;
@@ -116,19 +123,17 @@ pub fn propagate_nearest(
                     continue;
                 }
                 let c = chord(mesh.positions[h], o);
-                if c <= max_chord && (c as f32) < offered[h] {
-                    offered[h] = c as f32;
-                    push(&mut buckets, cur, c, h as u32, l);
-                }
+                offer(&mut buckets, dist_rad, label, cur, c, h as u32, l);
             }
         }
         buckets[cur] = Vec::new();
         cur += 1;
     }
-    for &n in &reached {
-        let c = dist_rad[n as usize] as f64;
-        dist_rad[n as usize] = (2.0 * (0.5 * c).min(1.0).asin()) as f32;
-    }
+    dist_rad.par_iter_mut().with_min_len(4096).for_each(|d| {
+        if d.is_finite() {
+            *d = (2.0 * (0.5 * *d as f64).min(1.0).asin()) as f32;
+        }
+    });
 }
 
 /// Driftworld's cubic distance transfer: 1 at the control distance `rc`, 0 at `rs` (and beyond),

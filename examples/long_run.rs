@@ -1,6 +1,7 @@
 //! The long run of the convergence work: the default planet over 1000 My, printing continental
 //! area, land fraction, highest elevation and plate count every 100 My.
-//! `cargo run --release --example long_run -- [samples] [seeds...]`
+//! `cargo run --release --example long_run -- [samples] [seeds...]` (environment: `PLANET_LOG`
+//! for logs, `INTERPENETRATION` and `TRAPPED` to try other collision thresholds, in km and km²).
 use tectonic_planets::prelude::*;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

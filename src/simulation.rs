@@ -341,14 +341,7 @@ impl Simulation {
         };
         resample::locate_sources(mesh, crust, &table, &rules, &mut sources);
         resample::interpolate(mesh, crust, &table, &sources, &mut next);
-        let gap_ids: Vec<u32> = sources
-            .iter()
-            .enumerate()
-            .filter(|(_, s)| s.is_gap())
-            .map(|(j, _)| j as u32)
-            .collect();
-        let gaps = resample::nearest_two_plates(mesh, &next.plate, &gap_ids);
-        resample::fill_gaps_from_nearest(&mut next, &gaps);
+        let gaps = resample::gaps_from_nearest(mesh, &sources, &mut next);
         if ocean_on {
             let elapsed = clock.steps_since_resample as f64 * params.time.time_step_my;
             oceanic_crust::fill_ridge_crust(mesh, params, elapsed, &gaps, &mut next);

@@ -66,14 +66,19 @@ impl Location {
     /// Index (0..3) of the vertex with the largest weight; ties go to the lowest index.
     #[inline]
     pub fn dominant_corner(&self) -> usize {
-        let w = self.weights;
-        if w[0] >= w[1] && w[0] >= w[2] {
-            0
-        } else if w[1] >= w[2] {
-            1
-        } else {
-            2
-        }
+        dominant_corner(&self.weights)
+    }
+}
+
+/// Index (0..3) of the largest of three barycentric weights; ties go to the lowest index.
+#[inline]
+pub fn dominant_corner(w: &[f64; 3]) -> usize {
+    if w[0] >= w[1] && w[0] >= w[2] {
+        0
+    } else if w[1] >= w[2] {
+        1
+    } else {
+        2
     }
 }
 

@@ -1683,10 +1683,19 @@ fn load_convergence(world: &mut World, r: &mut SectionReader, _v: u32) -> Result
     });
     world.insert_resource(field);
     world.insert_resource(OverridePairs(pairs));
+    // Terrane centroids are kept once, on the entities; the field's copy is rebuilt from them.
+    let mut centroid = vec![glam::DVec3::Z; area_km2.len()];
+    for t in &terranes {
+        match centroid.get_mut(t.index as usize) {
+            Some(c) => *c = t.centroid,
+            None => return Err(format!("terrane {} does not exist", t.index)),
+        }
+    }
     world.insert_resource(TerraneField {
         terrane,
         area_km2,
         plate,
+        centroid,
     });
     world.resource_mut::<Sutures>().total = total;
     world

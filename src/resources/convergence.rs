@@ -88,6 +88,8 @@ pub struct TerraneField {
     pub area_km2: Vec<f64>,
     /// Plate id per terrane.
     pub plate: Vec<u32>,
+    /// Area-weighted centroid per terrane, its plate's frame.
+    pub centroid: Vec<DVec3>,
 }
 
 /// A collision decided this step: a terrane leaves its plate for another at the next resampling.

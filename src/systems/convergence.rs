@@ -519,8 +519,7 @@ pub fn build_terranes(world: &mut World) {
     let n = mesh.len();
     let mut field = TerraneField {
         terrane: vec![NONE; n],
-        area_km2: Vec::new(),
-        plate: Vec::new(),
+        ..Default::default()
     };
     let mut terranes = Vec::new();
     let mut stack = Vec::new();
@@ -549,13 +548,15 @@ pub fn build_terranes(world: &mut World) {
                 }
             }
         }
+        let centroid = centroid.try_normalize().unwrap_or(mesh.positions[s]);
         field.area_km2.push(area);
         field.plate.push(plate);
+        field.centroid.push(centroid);
         terranes.push(Terrane {
             index: t,
             plate: PlateId(plate),
             area_km2: area,
-            centroid: centroid.try_normalize().unwrap_or(mesh.positions[s]),
+            centroid,
             samples: count,
         });
     }
@@ -752,7 +753,6 @@ pub fn slab_pull(
 pub fn find_collisions(
     threshold_km: f64,
     lookahead_my: f64,
-    mesh: &SphereMesh,
     params: &Params,
     crust: &Crust,
     fp: &FrontPoints,
@@ -819,14 +819,7 @@ pub fn find_collisions(
         let (Some(pf), Some(pt)) = (table.get(from), table.get(to)) else {
             continue;
         };
-        // Centroid of the moving terrane, world frame.
-        let mut c = DVec3::ZERO;
-        for (s, &t) in terranes.terrane.iter().enumerate() {
-            if t == moving {
-                c += mesh.positions[s] * mesh.area_km2[s];
-            }
-        }
-        let centroid = pf.world_from_plate * c.try_normalize().unwrap_or(DVec3::Z);
+        let centroid = pf.world_from_plate * terranes.centroid[moving as usize];
         let v = (pf.motion.velocity_km_per_my(centroid, r_km)
             - pt.motion.velocity_km_per_my(centroid, r_km))
         .length();
@@ -846,7 +839,6 @@ pub fn find_collisions(
 /// What the collision checks read.
 #[derive(bevy_ecs::system::SystemParam)]
 pub struct CollisionInputs<'w, 's> {
-    mesh: Res<'w, SphereMesh>,
     params: Res<'w, Params>,
     crust: Res<'w, Crust>,
     fp: Res<'w, FrontPoints>,
@@ -871,7 +863,6 @@ impl CollisionInputs<'_, '_> {
         find_collisions(
             threshold_km,
             lookahead_my,
-            &self.mesh,
             &self.params,
             &self.crust,
             &self.fp,

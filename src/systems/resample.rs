@@ -299,17 +299,6 @@ pub fn locate_one(
     best.map_or(SampleSource::GAP, |b| b.source)
 }
 
-#[inline]
-fn dominant(w: &[f64; 3]) -> usize {
-    if w[0] >= w[1] && w[0] >= w[2] {
-        0
-    } else if w[1] >= w[2] {
-        1
-    } else {
-        2
-    }
-}
-
 /// Interpolates every field of `old` at the sources into `next` (gap samples get zeros and
 /// `NO_PLATE`). Scalars are barycentric; the crust type is a weighted vote; other categories
 /// come from the nearest vertex; direction
@@ -429,7 +418,7 @@ pub fn interpolate(
                 let t = world - q * q.dot(world);
                 [t.x as f32, t.y as f32, t.z as f32]
             };
-            let d = v[dominant(&w)];
+            let d = v[crate::geometry::locator::dominant_corner(&w)];
             *z = lerp(&old.elevation_km);
             *e = lerp(&old.thickness_km);
             *ct = out_type;
@@ -581,6 +570,24 @@ pub fn nearest_two_plates(mesh: &SphereMesh, plate: &[u32], gaps: &[u32]) -> Vec
         current += 1;
     }
     out
+}
+
+/// The gap samples of a resampling (sources no plate covers), with their two nearest plates,
+/// each filled for now with a copy of its nearest covered sample ([`fill_gaps_from_nearest`]).
+pub fn gaps_from_nearest(
+    mesh: &SphereMesh,
+    sources: &[SampleSource],
+    next: &mut Crust,
+) -> Vec<GapSample> {
+    let gap_ids: Vec<u32> = sources
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.is_gap())
+        .map(|(j, _)| j as u32)
+        .collect();
+    let gaps = nearest_two_plates(mesh, &next.plate, &gap_ids);
+    fill_gaps_from_nearest(next, &gaps);
+    gaps
 }
 
 /// Fills each gap sample with a copy of its nearest covered sample (the fallback when no gap
@@ -877,20 +884,12 @@ pub fn resample_interpolate(
     interpolate(&mesh, &crust, &table, &work.sources, &mut work.next);
     displace_overridden_continents(&mesh, &params, &work.sources, &mut work.next);
     lap("interpolate", &mut t);
-    let gap_ids: Vec<u32> = work
-        .sources
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| s.is_gap())
-        .map(|(j, _)| j as u32)
-        .collect();
-    work.gaps = nearest_two_plates(&mesh, &work.next.plate, &gap_ids);
+    work.gaps = gaps_from_nearest(&mesh, &work.sources, &mut work.next);
     lap("nearest plates of gaps", &mut t);
-    fill_gaps_from_nearest(&mut work.next, &work.gaps);
     work.elapsed_my = clock.steps_since_resample as f64 * params.time.time_step_my;
     work.active = true;
     work.started = Some(started);
-    tracing::trace!(gaps = gap_ids.len(), "resample: interpolated");
+    tracing::trace!(gaps = work.gaps.len(), "resample: interpolated");
 }
 
 /// Last system of a resampling: installs the new crust, makes plates connected, rebuilds the

@@ -408,13 +408,24 @@ fn generate(a: GenerateArgs) -> Result<()> {
     let plan = save_plan(&sim, &a.saving, None)?;
     let steps = sim.steps_for(a.my)?;
     run_steps_with_progress(&mut sim, steps, a.quiet, plan.as_ref())?;
-    let mut files = write_outputs(&mut sim, &a.out, a.width)?;
-    if let Some((path, _)) = &plan {
-        save_now(&mut sim, path)?;
+    let files = write_outputs(&mut sim, &a.out, a.width)?;
+    finish_run(&mut sim, plan.as_ref(), files, a.quiet, started)
+}
+
+/// The end of `generate` and `resume`: the final save (if any), then the report.
+fn finish_run(
+    sim: &mut Simulation,
+    plan: Option<&(PathBuf, u64)>,
+    mut files: Vec<PathBuf>,
+    quiet: bool,
+    started: Instant,
+) -> Result<()> {
+    if let Some((path, _)) = plan {
+        save_now(sim, path)?;
         files.push(path.clone());
     }
-    if !a.quiet {
-        report(&sim, started, &files);
+    if !quiet {
+        report(sim, started, &files);
     }
     Ok(())
 }
@@ -435,18 +446,11 @@ fn resume(a: ResumeArgs) -> Result<()> {
     let plan = save_plan(&sim, &a.saving, Some(&a.file))?;
     let steps = sim.steps_for(a.my)?;
     run_steps_with_progress(&mut sim, steps, a.quiet, plan.as_ref())?;
-    let mut files = Vec::new();
-    if let Some(out) = &a.out {
-        files = write_outputs(&mut sim, out, a.width)?;
-    }
-    if let Some((path, _)) = &plan {
-        save_now(&mut sim, path)?;
-        files.push(path.clone());
-    }
-    if !a.quiet {
-        report(&sim, started, &files);
-    }
-    Ok(())
+    let files = match &a.out {
+        Some(out) => write_outputs(&mut sim, out, a.width)?,
+        None => Vec::new(),
+    };
+    finish_run(&mut sim, plan.as_ref(), files, a.quiet, started)
 }
 
 fn export(a: ExportArgs) -> Result<()> {

@@ -1,8 +1,27 @@
-//! The long run of the convergence work: the default planet over 1000 My, printing continental
-//! area, land fraction, highest elevation and plate count every 100 My.
-//! `cargo run --release --example long_run -- [samples] [seeds...]` (environment: `PLANET_LOG`
-//! for logs, `INTERPENETRATION` and `TRAPPED` to try other collision thresholds, in km and km²).
+//! The long run: a planet over many steps, printing plate count, continental area, land fraction,
+//! highest elevation, rifts, collisions and peak memory every 100 steps, then checking the
+//! criteria of the rifting issue (plates 8–100, continental area within ±15%, land 0.15–0.5, no
+//! NaN, peak memory at the end within 10% of that at step 100). Exits with status 1 if a seed
+//! fails them.
+//!
+//! `cargo run --release --example long_run -- [samples] [steps] [seeds...]`
+//! (defaults: 100,000 samples, 1000 steps, seeds 1–5; `PLANET_LOG` for logs, `RIFT_RATE` to try
+//! another `rifting.frequency_per_my`).
 use tectonic_planets::prelude::*;
+use tectonic_planets::resources::Sutures;
+use tectonic_planets::systems::rifting::{RiftCause, RiftLog};
+
+/// Peak resident memory (VmHWM), bytes.
+fn peak_rss() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+        })
+        .map_or(0, |kb| kb * 1024)
+}
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Ok(f) = tracing_subscriber::EnvFilter::try_from_env("PLANET_LOG") {
@@ -16,61 +35,103 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .filter_map(|a| a.parse().ok())
         .collect();
     let samples = args.first().copied().unwrap_or(100_000);
-    let seeds: Vec<u64> = if args.len() > 1 {
-        args[1..].to_vec()
+    let steps = args.get(1).copied().unwrap_or(1000);
+    let seeds: Vec<u64> = if args.len() > 2 {
+        args[2..].to_vec()
     } else {
         vec![1, 2, 3, 4, 5]
     };
+    let mut failed = Vec::new();
     for seed in seeds {
         let mut p = Params::default();
         p.planet.samples = samples;
         p.planet.seed = seed;
-        if let Ok(v) = std::env::var("INTERPENETRATION") {
-            p.collision.interpenetration_km = v.parse()?;
-        }
-        if let Ok(v) = std::env::var("TRAPPED") {
-            p.collision.trapped_ocean_km2 = v.parse()?;
+        if let Ok(v) = std::env::var("RIFT_RATE") {
+            p.rifting.frequency_per_my = v.parse()?;
         }
         let mut sim = Simulation::new(p)?;
         let c0 = sim.stats().continental_fraction;
         let t = std::time::Instant::now();
-        let (mut lo, mut hi, mut zmax, mut worst) = (1.0f64, 0.0f64, f32::MIN, 0.0f64);
-        for step in 1..=500 {
+        let (mut plates_lo, mut plates_hi) = (usize::MAX, 0usize);
+        let (mut land_lo, mut land_hi, mut zmax, mut worst) = (1.0f64, 0.0f64, f32::MIN, 0.0f64);
+        let mut peak_at_100 = 0;
+        for step in 1..=steps {
             sim.step()?;
             let s = sim.stats().clone();
-            lo = lo.min(s.land_fraction);
-            hi = hi.max(s.land_fraction);
+            plates_lo = plates_lo.min(s.plates);
+            plates_hi = plates_hi.max(s.plates);
+            land_lo = land_lo.min(s.land_fraction);
+            land_hi = land_hi.max(s.land_fraction);
             zmax = zmax.max(s.elevation_range_km.1);
             worst = worst.max((s.continental_fraction - c0).abs() / c0);
-            if step % 50 == 0 {
+            if step == 100 {
+                peak_at_100 = peak_rss();
+            }
+            if step % 100 == 0 || step == steps {
+                let log = sim.world().resource::<RiftLog>();
+                let random = log
+                    .events
+                    .iter()
+                    .filter(|e| e.cause == RiftCause::Random)
+                    .count();
                 let lost = sim
                     .world()
                     .resource::<tectonic_planets::systems::resample::ResampleWork>()
-                    .continental_subducted_total_km2;
-                let total = sim.mesh().total_area_km2();
+                    .continental_subducted_total_km2
+                    / sim.mesh().total_area_km2();
                 println!(
-                    "   subducted continental so far: {:.3} of the surface; collisions {}",
-                    lost / total,
-                    sim.world()
-                        .resource::<tectonic_planets::resources::Sutures>()
-                        .total
-                );
-                println!(
-                    "seed {seed} {:>5.0} My: continental {:.3} ({:+.1}%), land {:.3}, max {:.2} km, plates {}",
+                    "seed {seed} step {step:>5} ({:>5.0} My): plates {:>3}, continental {:.3} ({:+.1}%), land {:.3}, max {:.2} km, rifts {random}, collisions {}, forced under {lost:.3}, peak {:.0} MB",
                     sim.time_my(),
+                    s.plates,
                     s.continental_fraction,
                     100.0 * (s.continental_fraction - c0) / c0,
                     s.land_fraction,
                     s.elevation_range_km.1,
-                    s.plates
+                    sim.world().resource::<Sutures>().total,
+                    peak_rss() as f64 / 1e6,
                 );
             }
         }
+        let peak_end = peak_rss();
+        let mem_growth = if peak_at_100 > 0 {
+            peak_end as f64 / peak_at_100 as f64 - 1.0
+        } else {
+            0.0
+        };
+        let rift_ms: Vec<f64> = {
+            let mut v: Vec<f64> = sim
+                .world()
+                .resource::<RiftLog>()
+                .events
+                .iter()
+                .map(|e| e.elapsed_ms)
+                .collect();
+            v.sort_by(f64::total_cmp);
+            v
+        };
         println!(
-            "seed {seed}: land {lo:.3}..{hi:.3}, highest {zmax:.2} km, worst continental change {:.1}%, {:.1} s",
+            "seed {seed}: plates {plates_lo}..{plates_hi}, land {land_lo:.3}..{land_hi:.3}, highest {zmax:.2} km, worst continental change {:.1}%, peak memory {:+.1}% from step 100 to {steps}, median rift {:.1} ms over {} rifts, {:.1} s",
             100.0 * worst,
+            100.0 * mem_growth,
+            rift_ms.get(rift_ms.len() / 2).copied().unwrap_or(f64::NAN),
+            rift_ms.len(),
             t.elapsed().as_secs_f64()
         );
+        let ok = (8..=100).contains(&plates_lo)
+            && (8..=100).contains(&plates_hi)
+            && worst <= 0.15
+            && land_lo >= 0.15
+            && land_hi <= 0.5
+            && mem_growth <= 0.10;
+        if !ok {
+            failed.push(seed);
+        }
     }
-    Ok(())
+    if failed.is_empty() {
+        println!("all seeds meet the long-run criteria");
+        Ok(())
+    } else {
+        println!("seeds failing the long-run criteria: {failed:?}");
+        std::process::exit(1);
+    }
 }

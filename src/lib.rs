@@ -6,6 +6,7 @@
 //! resources, plates are entities, and each phenomenon is a plugin whose systems sit in one set
 //! of the [`TectonicStep`](plugins::TectonicStep) schedule. Start with [`Simulation`].
 
+pub mod commands;
 pub mod components;
 pub mod geometry;
 pub mod io;
@@ -19,6 +20,7 @@ pub use simulation::{SimError, Simulation};
 
 /// What a user or plugin author imports.
 pub mod prelude {
+    pub use crate::commands::{Cap, Command, CrustKind, LatLon, PlateRef, Script};
     pub use crate::components::{
         FrontKind, Plate, PlateBounds, PlateFrame, PlateId, PlateMesh, PlateMotion, PlateStats,
         SubductionFront, Terrane,
@@ -28,8 +30,8 @@ pub mod prelude {
     pub use crate::plugins::{
         AfterResample, AfterResampleSystems, AgingPlugin, CollisionPlugin, DiagnosticsPlugin,
         DriftPlugin, ErosionPlugin, OceanicCrustPlugin, PhenomenonAppExt, ResamplePlugin,
-        ResampleSystems, SlabPullPlugin, SubductionPlugin, TectonicPlugins, TectonicStep,
-        TectonicSystems, TerranePlugin,
+        ResampleSystems, RiftingPlugin, SlabPullPlugin, SubductionPlugin, TectonicPlugins,
+        TectonicStep, TectonicSystems, TerranePlugin,
     };
     pub use crate::resources::{Crust, CrustType, Orogeny, Phenomena, phenomenon_enabled};
     pub use crate::simulation::{SimError, Simulation};

@@ -7,6 +7,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use tectonic_planets::Simulation;
+use tectonic_planets::commands::{Command as Cmd, Outcome, Script};
 use tectonic_planets::io::maps::{Raster, write_all_maps};
 use tectonic_planets::io::params::{ParamValue, Params};
 use tectonic_planets::io::save::{self, CommandHistory};
@@ -138,6 +139,12 @@ struct GenerateArgs {
     quiet: bool,
     #[command(flatten)]
     saving: SaveArgs,
+    /// A script of timed authoring commands (TOML; see examples/scripts/ and docs/authoring.md).
+    #[arg(long)]
+    script: Option<PathBuf>,
+    /// Also write the maps every this many million years, into `<out>/t<time>My/`.
+    #[arg(long, value_name = "MY")]
+    maps_every: Option<f64>,
 }
 
 #[derive(Args)]
@@ -248,7 +255,10 @@ fn build_sim(a: &PlanetArgs) -> Result<Simulation> {
     for name in &a.disable {
         let name = name.trim();
         if !name.is_empty() {
-            sim.set_enabled(name, false)?;
+            sim.apply(&Cmd::SetPhenomenon {
+                name: name.to_string(),
+                enabled: false,
+            })?;
         }
     }
     Ok(sim)
@@ -319,13 +329,40 @@ fn save_now(sim: &mut Simulation, path: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Runs `steps` steps with a progress bar, saving every `plan.1` steps (when non-zero).
+/// What happens along a run besides stepping: saves, script events, map snapshots.
+#[derive(Default)]
+struct RunExtras<'a> {
+    /// Save file and steps between saves (0: only at the end, by the caller).
+    plan: Option<&'a (PathBuf, u64)>,
+    /// Timed commands.
+    script: Option<Script>,
+    /// Map snapshots: folder, steps between snapshots and map width.
+    maps: Option<(PathBuf, u64, u32)>,
+}
+
+fn describe(o: &Outcome) -> String {
+    match o {
+        Outcome::Motion { plate } => format!("plate {plate} has a new motion"),
+        Outcome::CrustType { samples } => format!("{samples} samples changed crust type"),
+        Outcome::Rift { fragments } => format!("rift into plates {fragments:?}"),
+        Outcome::Uplift { samples } => format!("{samples} samples raised or lowered"),
+        Outcome::Phenomenon => "phenomenon switched".into(),
+    }
+}
+
+/// Runs `steps` steps with a progress bar, applying script events when due, saving every
+/// `plan.1` steps (when non-zero) and writing map snapshots.
 fn run_steps_with_progress(
     sim: &mut Simulation,
     steps: u64,
     quiet: bool,
-    plan: Option<&(PathBuf, u64)>,
+    extras: RunExtras,
 ) -> Result<()> {
+    let RunExtras {
+        plan,
+        mut script,
+        maps,
+    } = extras;
     let bar = if quiet {
         ProgressBar::hidden()
     } else {
@@ -340,7 +377,31 @@ fn run_steps_with_progress(
     );
     let dt = sim.params().time.time_step_my;
     for k in 0..steps {
+        if let Some(script) = script.as_mut() {
+            for (event, outcome) in script.apply_due(sim)? {
+                if !quiet {
+                    bar.suspend(|| {
+                        eprintln!(
+                            "{:>7.1} My  {}{}",
+                            sim.time_my(),
+                            event
+                                .note
+                                .as_deref()
+                                .map(|n| format!("{n}: "))
+                                .unwrap_or_default(),
+                            describe(&outcome)
+                        )
+                    });
+                }
+            }
+        }
         sim.step()?;
+        if let Some((dir, every, width)) = &maps
+            && (k + 1) % every == 0
+        {
+            let sub = dir.join(format!("t{:04.0}My", sim.time_my()));
+            write_outputs(sim, &sub, *width)?;
+        }
         if let Some((path, every)) = plan
             && *every > 0
             && (k + 1) % every == 0
@@ -407,7 +468,36 @@ fn generate(a: GenerateArgs) -> Result<()> {
         .record(0, command_line());
     let plan = save_plan(&sim, &a.saving, None)?;
     let steps = sim.steps_for(a.my)?;
-    run_steps_with_progress(&mut sim, steps, a.quiet, plan.as_ref())?;
+    let script = match &a.script {
+        Some(path) => {
+            let script = Script::load(path)?;
+            script.validate(sim.params())?;
+            let late = script.events.iter().filter(|e| e.at_my > a.my).count();
+            if late > 0 && !a.quiet {
+                eprintln!(
+                    "note: {late} script event(s) come after the end of the run ({} My) and will not happen",
+                    a.my
+                );
+            }
+            Some(script)
+        }
+        None => None,
+    };
+    let maps = match a.maps_every {
+        Some(my) => {
+            if !my.is_finite() || my <= 0.0 {
+                bail!("--maps-every must be a finite, positive number of million years, got {my}");
+            }
+            Some((a.out.clone(), sim.steps_for(my)?.max(1), a.width))
+        }
+        None => None,
+    };
+    let extras = RunExtras {
+        plan: plan.as_ref(),
+        script,
+        maps,
+    };
+    run_steps_with_progress(&mut sim, steps, a.quiet, extras)?;
     let files = write_outputs(&mut sim, &a.out, a.width)?;
     finish_run(&mut sim, plan.as_ref(), files, a.quiet, started)
 }
@@ -445,7 +535,11 @@ fn resume(a: ResumeArgs) -> Result<()> {
         .record(step, command_line());
     let plan = save_plan(&sim, &a.saving, Some(&a.file))?;
     let steps = sim.steps_for(a.my)?;
-    run_steps_with_progress(&mut sim, steps, a.quiet, plan.as_ref())?;
+    let extras = RunExtras {
+        plan: plan.as_ref(),
+        ..Default::default()
+    };
+    run_steps_with_progress(&mut sim, steps, a.quiet, extras)?;
     let files = match &a.out {
         Some(out) => write_outputs(&mut sim, out, a.width)?,
         None => Vec::new(),

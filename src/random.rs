@@ -35,6 +35,10 @@ pub mod stream {
     pub const PLATE_MOTION: u64 = 3;
     /// Plate continental bias.
     pub const PLATE_CONTINENT: u64 = 4;
+    /// Random rifting events (one generator per step).
+    pub const RIFT: u64 = 5;
+    /// Rifts asked for by commands (fragment centroids, divergence jitter).
+    pub const RIFT_COMMAND: u64 = 6;
     /// Noise fields (each field adds its own offset).
     pub const NOISE: u64 = 100;
 }

@@ -481,7 +481,13 @@ define_params! {
     }
     /// Plate rifting.
     [rifting] Rifting {
-        frequency_per_my: f64 = 0.1, 0.0..=10.0, "1/My", "Average rifting frequency λ0 (Driftworld).";
+        frequency_per_my: f64 = 0.004, 0.0..=10.0, "1/My", "Rifting rate λ0: expected rifting events per My of an all-continental plate of the reference area A0 = planet area / init.plates. A plate rifts during a step with probability 1 − exp(−λ), λ = λ0·δt·f(x)·A/A0 (see systems::rifting).";
+        oceanic_factor: f64 = 0.2, 0.0..=1.0, "", "f(0): the rifting rate of an all-oceanic plate relative to an all-continental one; f(x) = f(0) + (1 − f(0))·x for a continental share x.";
+        min_plate_area_km2: f64 = 6.0e6, 0.0..=1e9, "km²", "Plates smaller than this never rift on their own.";
+        max_fragments: u64 = 4, 2..=4, "", "A random rift splits a plate into 2 to this many fragments (paper: n ∈ [2, 4]).";
+        divergence_speed_mm_per_yr: f64 = 25.0, 0.0..=1000.0, "mm/yr", "Speed at which each fragment moves away from the parent's centroid, added to the parent's own motion.";
+        fracture_warp_km: f64 = 400.0, 0.0..=3000.0, "km", "Amplitude of the noise that warps the Voronoi borders between fragments into irregular fracture lines.";
+        fracture_wavelength_km: f64 = 2500.0, 100.0..=40000.0, "km", "Wavelength of the fracture-warping noise.";
     }
     /// Global resampling.
     [resample] Resample {
@@ -1376,7 +1382,7 @@ mod tests {
     #[test]
     fn schema_is_consistent() {
         let schema = Params::schema();
-        assert_eq!(schema.len(), 43);
+        assert_eq!(schema.len(), 49);
         assert_eq!(schema.len(), BOUNDS.len());
         let mut seen = HashSet::new();
         for (spec, (lo, hi)) in schema.iter().zip(BOUNDS) {
@@ -1397,7 +1403,7 @@ mod tests {
             check_value(spec, (*lo, *hi), spec.default).unwrap();
         }
         assert_eq!(schema[0].key, "planet.radius_km");
-        assert_eq!(schema[42].key, "resample.fragment_min_area_km2");
+        assert_eq!(schema[48].key, "resample.fragment_min_area_km2");
         assert_eq!(SECTIONS.len(), 10);
     }
 

@@ -26,7 +26,9 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::{ScheduleLabel, SingleThreadedExecutor};
 
 use crate::resources::{Phenomena, ResampleRequest, SimClock, StepTimings, phenomenon_enabled};
-use crate::systems::{aging, convergence, diagnostics, drift, erosion, oceanic_crust, resample};
+use crate::systems::{
+    aging, convergence, diagnostics, drift, erosion, oceanic_crust, resample, rifting,
+};
 
 /// The schedule that runs one tectonic time step.
 #[derive(ScheduleLabel, Clone, Debug, PartialEq, Eq, Hash)]
@@ -252,6 +254,28 @@ phenomenon_plugin!(
     ErosionPlugin, "erosion", TectonicSystems::Erosion, "continental erosion, oceanic damping, sediment accretion",
     erosion::erode.in_set(TectonicSystems::Erosion)
 );
+/// Plate rifting (phenomenon `rifting`): plates break into 2–4 diverging fragments at random
+/// (a Poisson process favouring large, continental plates; see [`rifting`]).
+#[derive(Default)]
+pub struct RiftingPlugin;
+
+impl Plugin for RiftingPlugin {
+    fn build(&self, app: &mut App) {
+        app.register_phenomenon(
+            "rifting",
+            TectonicSystems::Rifting,
+            "large plates break into diverging fragments",
+        );
+        app.init_resource::<rifting::RiftLog>();
+        app.add_systems(
+            TectonicStep,
+            rifting::rift_plates
+                .in_set(TectonicSystems::Rifting)
+                .run_if(phenomenon_enabled("rifting")),
+        );
+    }
+}
+
 phenomenon_plugin!(
     /// Crust and orogeny aging (phenomenon `aging`).
     AgingPlugin, "aging", TectonicSystems::Aging, "crust and orogeny ages grow by the time step",
@@ -399,6 +423,7 @@ impl PluginGroup for TectonicPlugins {
             .add(SubductionPlugin)
             .add(ErosionPlugin)
             .add(SlabPullPlugin)
+            .add(RiftingPlugin)
             .add(AgingPlugin)
             .add(ResamplePlugin)
             .add(TerranePlugin)

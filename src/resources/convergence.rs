@@ -119,4 +119,7 @@ pub struct Sutures {
     pub applied: Vec<(Suture, Vec<u32>)>,
     /// Every collision so far.
     pub total: u64,
+    /// The sutures of the last resampling that applied any, kept after the collision uplift
+    /// consumed `applied` (for reports and tests; not saved).
+    pub last_applied: Vec<Suture>,
 }

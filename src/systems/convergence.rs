@@ -897,6 +897,10 @@ pub fn collide_before_resample(inputs: CollisionInputs, mut sutures: ResMut<Sutu
 /// After a resampling that applied sutures: the collision surge around each sutured terrane.
 pub fn collision_uplift(world: &mut World) {
     let applied = std::mem::take(&mut world.resource_mut::<Sutures>().applied);
+    if !applied.is_empty() {
+        world.resource_mut::<Sutures>().last_applied =
+            applied.iter().map(|a| a.0.clone()).collect();
+    }
     if applied.is_empty() {
         return;
     }

@@ -8,6 +8,7 @@ pub mod erosion;
 pub mod init;
 pub mod oceanic_crust;
 pub mod resample;
+pub mod rifting;
 
 /// Logs the wall time of a scope at debug level when dropped.
 pub struct DebugTimer {

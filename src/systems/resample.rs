@@ -454,43 +454,82 @@ pub fn displace_overridden_continents(
         return;
     }
     let mut visited = vec![false; mesh.len()];
-    let (mut lost, mut moved) = (0usize, 0usize);
+    let (mut lost, mut moved, mut spilled) = (0usize, 0usize, 0usize);
     for (plate, starts) in by_plate {
-        let mut debt = starts.len();
-        lost += debt;
-        let mut queue: std::collections::VecDeque<u32> = starts.iter().copied().collect();
-        for &s in &starts {
-            visited[s as usize] = true;
+        lost += starts.len();
+        // First within the plate; what a plate without enough ocean of its own (a continental
+        // fragment fresh from a rift) cannot take spills onto the neighbouring plates' ocean,
+        // which keeps its plate.
+        let debt = spread_continent(
+            mesh,
+            next,
+            &starts,
+            starts.len(),
+            Some(plate),
+            &mut visited,
+            thickness,
+        );
+        moved += starts.len() - debt;
+        if debt > 0 {
+            visited.iter_mut().for_each(|v| *v = false);
+            let left = spread_continent(mesh, next, &starts, debt, None, &mut visited, thickness);
+            spilled += debt - left;
+            moved += debt - left;
         }
-        while let Some(u) = queue.pop_front() {
-            if debt == 0 {
-                break;
+        visited.iter_mut().for_each(|v| *v = false);
+    }
+    tracing::debug!(
+        lost,
+        moved,
+        spilled,
+        "overridden continental samples displaced"
+    );
+}
+
+/// Breadth-first from `starts`, turns up to `debt` oceanic samples next to continental ones into
+/// continental crust with the elevation and orogeny of that neighbour; with `plate`, only through
+/// and into that plate's samples. Returns the debt left.
+fn spread_continent(
+    mesh: &SphereMesh,
+    next: &mut Crust,
+    starts: &[u32],
+    mut debt: usize,
+    plate: Option<u32>,
+    visited: &mut [bool],
+    thickness: f32,
+) -> usize {
+    let mut queue: std::collections::VecDeque<u32> = starts.iter().copied().collect();
+    for &s in starts {
+        visited[s as usize] = true;
+    }
+    while let Some(u) = queue.pop_front() {
+        if debt == 0 {
+            break;
+        }
+        let u = u as usize;
+        for &v in mesh.neighbors_of(u) {
+            let v = v as usize;
+            if visited[v] || plate.is_some_and(|p| next.plate[v] != p) || next.plate[v] == NO_PLATE
+            {
+                continue;
             }
-            let u = u as usize;
-            for &v in mesh.neighbors_of(u) {
-                let v = v as usize;
-                if visited[v] || next.plate[v] != plate {
-                    continue;
-                }
-                visited[v] = true;
-                if next.crust_type[v] == CrustType::Oceanic
-                    && debt > 0
-                    && next.crust_type[u] == CrustType::Continental
-                {
-                    next.crust_type[v] = CrustType::Continental;
-                    next.elevation_km[v] = next.elevation_km[u].max(0.0);
-                    next.thickness_km[v] = thickness;
-                    next.orogeny[v] = next.orogeny[u];
-                    next.orogeny_age_my[v] = next.orogeny_age_my[u];
-                    next.fold_dir[v] = next.fold_dir[u];
-                    debt -= 1;
-                    moved += 1;
-                }
-                queue.push_back(v as u32);
+            visited[v] = true;
+            if next.crust_type[v] == CrustType::Oceanic
+                && debt > 0
+                && next.crust_type[u] == CrustType::Continental
+            {
+                next.crust_type[v] = CrustType::Continental;
+                next.elevation_km[v] = next.elevation_km[u].max(0.0);
+                next.thickness_km[v] = thickness;
+                next.orogeny[v] = next.orogeny[u];
+                next.orogeny_age_my[v] = next.orogeny_age_my[u];
+                next.fold_dir[v] = next.fold_dir[u];
+                debt -= 1;
             }
+            queue.push_back(v as u32);
         }
     }
-    tracing::debug!(lost, moved, "overridden continental samples displaced");
+    debt
 }
 
 /// For every gap sample, the nearest covered sample of the nearest plate and of the nearest other

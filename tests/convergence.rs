@@ -25,6 +25,8 @@ fn two_hemispheres(
 ) -> Simulation {
     let mut p = params(samples, 3);
     p.init.continental_fraction = 0.0;
+    // Two hand-made hemispheres: no random rift may break them.
+    p.rifting.frequency_per_my = 0.0;
     p.resample.min_interval_steps = 10;
     p.resample.max_interval_steps = 10;
     let mut sim = Simulation::new(p).unwrap();

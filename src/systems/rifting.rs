@@ -15,7 +15,7 @@
 //! `λ_P/Λ`. (The paper writes `P = λ·e^{−λ}`, the probability of exactly one event, which
 //! *falls* for large plates; `1 − e^{−λ}`, at least one event, is what a Poisson process gives and
 //! grows with the plate.) At most one plate rifts per step, which the step length makes a
-//! negligible restriction (Λ is about 0.01 per step at the defaults).
+//! negligible restriction (Λ is a few hundredths per step at the defaults).
 //!
 //! **How.** `n` centroids (`n` uniform in 2..=`rifting.max_fragments`, fewer when the plate is
 //! too small for `n` fragments of `resample.fragment_min_area_km2`) are drawn among the plate's

@@ -16,7 +16,8 @@
 //!   of that plate within r/2 of the hotspot, or to a new one.
 //! - Edifices not over their hotspot subside: an edifice of height h loses
 //!   `h · (1 − exp(−δt/τ))` (τ = `subsidence_time_my`, thermal subsidence of the lithosphere)
-//!   over the same footprint, never below the abyssal plain; the core's oceanic damping (the
+//!   over the same footprint, never below the floor it was built on nor the abyssal plain; the
+//!   core's oceanic damping (the
 //!   `erosion` phenomenon) wears them down as well.
 //! - At each resampling, edifices are carried to the reference frame with their plate's
 //!   frame; an edifice whose ground now belongs to another plate went down a subduction zone
@@ -61,6 +62,9 @@ pub struct Edifice {
     pub built_km: f64,
     /// Time since the hotspot last built it, My.
     pub age_my: f64,
+    /// Elevation of the floor at its centre when it was founded, km: subsidence never takes
+    /// its footprint below this (nor below the abyssal plain).
+    pub base_km: f64,
 }
 
 impl Edifice {
@@ -348,6 +352,7 @@ fn build_and_subside(
     for spot in &spots {
         // The plate over the hotspot: highest surface among the plates owning the nearest
         // sample in their own frame.
+        // (plate, hotspot in the plate's frame, elevation under it)
         let mut best: Option<(u32, DVec3, f32)> = None;
         for &(id, frame, bounds) in &plate_list {
             let q = (frame.inverse() * spot.position).normalize();
@@ -370,7 +375,9 @@ fn build_and_subside(
                 best = Some((id, q, z));
             }
         }
-        let Some((plate, q, _)) = best else { continue };
+        let Some((plate, q, z_under)) = best else {
+            continue;
+        };
         // Its edifice: the nearest on this plate within r/2, else a new one.
         let near = list
             .iter()
@@ -404,6 +411,7 @@ fn build_and_subside(
                     height_km: dz_km,
                     built_km: dz_km,
                     age_my: 0.0,
+                    base_km: f64::from(z_under),
                 });
                 state.next_serial += 1;
             }
@@ -417,6 +425,7 @@ fn build_and_subside(
             continue;
         }
         let loss_km = e.height_km * (1.0 - keep);
+        let floor = floor_km.max(e.base_km as f32);
         footprint(
             &mesh,
             crust,
@@ -428,7 +437,7 @@ fn build_and_subside(
         );
         for &(i, d) in &samples {
             let z = &mut crust.elevation_km[i];
-            let dz = ((loss_km * profile(d / r_rad)) as f32).min((*z - floor_km).max(0.0));
+            let dz = ((loss_km * profile(d / r_rad)) as f32).min((*z - floor).max(0.0));
             *z -= dz;
         }
         e.height_km -= loss_km;
@@ -520,6 +529,7 @@ fn save_state(world: &mut World, w: &mut SectionWriter) -> Result<(), String> {
         w.f64(e.height_km);
         w.f64(e.built_km);
         w.f64(e.age_my);
+        w.f64(e.base_km);
     }
     Ok(())
 }
@@ -571,7 +581,7 @@ fn load_state(world: &mut World, r: &mut SectionReader, _v: u32) -> Result<(), S
         });
     }
     let n = r.u32()? as usize;
-    if r.remaining() < n.saturating_mul(64) {
+    if r.remaining() < n.saturating_mul(72) {
         return Err("edifices are truncated".into());
     }
     let mut plates = world.resource::<Crust>().plate.clone();
@@ -587,6 +597,7 @@ fn load_state(world: &mut World, r: &mut SectionReader, _v: u32) -> Result<(), S
             height_km: r.finite_f64("edifice height")?,
             built_km: r.finite_f64("edifice build")?,
             age_my: r.finite_f64("edifice age")?,
+            base_km: r.finite_f64("edifice base")?,
         };
         if e.serial >= next_serial || plates.binary_search(&e.plate.0).is_err() {
             return Err(format!(

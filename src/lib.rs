@@ -31,13 +31,13 @@ pub mod prelude {
         PluginConfig, PluginParam, PluginParams, PluginParamsAppExt,
     };
     pub use crate::io::save::{SaveAppExt, SaveSection, SectionReader, SectionWriter};
-    pub use crate::random::{SimRng, hash3, mix64, unit_f64, unit_vector};
     pub use crate::plugins::{
         AfterResample, AfterResampleSystems, AgingPlugin, CollisionPlugin, DiagnosticsPlugin,
         DriftPlugin, ErosionPlugin, OceanicCrustPlugin, PhenomenonAppExt, ResamplePlugin,
         ResampleSystems, SlabPullPlugin, SubductionPlugin, TectonicPlugins, TectonicStep,
         TectonicSystems, TerranePlugin,
     };
+    pub use crate::random::{SimRng, hash3, mix64, unit_f64, unit_vector};
     pub use crate::resources::{
         Crust, CrustType, Orogeny, Phenomena, PhenomenonInfo, ResampleRequest, SimClock,
         phenomenon_enabled,

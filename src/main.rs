@@ -200,10 +200,7 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Plugins => {
             let sim = tiny_sim()?;
-            println!(
-                "{:<16} {:<12} {:<8} description",
-                "name", "set", "default"
-            );
+            println!("{:<16} {:<12} {:<8} description", "name", "set", "default");
             for p in sim.phenomena() {
                 println!(
                     "{:<16} {:<12} {:<8} {}",

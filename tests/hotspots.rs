@@ -71,7 +71,8 @@ fn hotspot_under_a_moving_oceanic_plate_builds_an_age_progressive_chain() {
     let hotspot_radius_km = 250.0;
     {
         let mut pp = sim.plugin_params_mut();
-        pp.set("plugins.hotspots.count", ParamValue::Int(0)).unwrap();
+        pp.set("plugins.hotspots.count", ParamValue::Int(0))
+            .unwrap();
         pp.set(
             "plugins.hotspots.radius_km",
             ParamValue::Float(hotspot_radius_km),
@@ -197,11 +198,7 @@ fn switched_off_hotspots_change_nothing_and_on_they_build() {
         .set("plugins.hotspots.radius_km", ParamValue::Float(400.0))
         .unwrap();
     on.run_steps(steps).unwrap();
-    let spots = on
-        .world_mut()
-        .query::<&Hotspot>()
-        .iter(on.world())
-        .count();
+    let spots = on.world_mut().query::<&Hotspot>().iter(on.world()).count();
     assert_eq!(spots, 6);
     assert!(
         edifices(&mut on).len() >= 20,
@@ -252,7 +249,10 @@ fn plugin_parameters_come_from_the_config_with_clear_errors() {
         ),
         (
             "[plugins.hotspots]\nradius = 3\n",
-            &["plugins.hotspots.radius", "did you mean \"plugins.hotspots.radius_km\""][..],
+            &[
+                "plugins.hotspots.radius",
+                "did you mean \"plugins.hotspots.radius_km\"",
+            ][..],
         ),
         (
             "[plugins.volcanoes]\ncount = 1\n",
@@ -315,7 +315,8 @@ fn the_hotspot_plugin_imports_only_the_prelude() {
             );
         }
         assert!(
-            !(code.starts_with("use ") || code.starts_with("pub use ")) || code.starts_with("use std::"),
+            !(code.starts_with("use ") || code.starts_with("pub use "))
+                || code.starts_with("use std::"),
             "line {}: `{}` imports something other than the prelude or std",
             k + 1,
             line.trim()

@@ -12,7 +12,8 @@
 //!   frame) belongs to it; where two plates overlap, the higher surface wins.
 //! - That plate's samples within `radius_km` of the hotspot rise by
 //!   `uplift_mm_per_yr · δt · (1 − (d/r)²)²` (great-circle distance d, crust thickens by as
-//!   much), until the edifice is `max_height_km` high. The uplift goes to the nearest edifice
+//!   much), until the edifice is `max_height_km` high (a quarter of it on continental ground,
+//!   where hotspots make plateaus rather than shields). The uplift goes to the nearest edifice
 //!   of that plate within r/2 of the hotspot, or to a new one.
 //! - Edifices not over their hotspot subside: an edifice of height h loses
 //!   `h · (1 − exp(−δt/τ))` (τ = `subsidence_time_my`, thermal subsidence of the lithosphere)
@@ -28,6 +29,10 @@
 //! `plugins.hotspots.count = 0` for only those).
 
 use crate::prelude::*;
+
+/// Fraction of `max_height_km` a hotspot builds on continental ground: continental hotspots
+/// (Yellowstone) make plateaus and calderas of a kilometre or two, not 8-km shields.
+pub const CONTINENTAL_HEIGHT_FRACTION: f64 = 0.25;
 
 /// The phenomenon name (for `--enable hotspots`).
 pub const HOTSPOTS: &str = "hotspots";
@@ -352,8 +357,8 @@ fn build_and_subside(
     for spot in &spots {
         // The plate over the hotspot: highest surface among the plates owning the nearest
         // sample in their own frame.
-        // (plate, hotspot in the plate's frame, elevation under it)
-        let mut best: Option<(u32, DVec3, f32)> = None;
+        // (plate, hotspot in the plate's frame, elevation under it, continental ground)
+        let mut best: Option<(u32, DVec3, f32, bool)> = None;
         for &(id, frame, bounds) in &plate_list {
             let q = (frame.inverse() * spot.position).normalize();
             if angle_between(q, bounds.centroid) > bounds.cap_radius_rad {
@@ -372,10 +377,11 @@ fn build_and_subside(
             }
             let z = crust.elevation_km[j];
             if best.is_none_or(|b| z > b.2) {
-                best = Some((id, q, z));
+                let continental = crust.crust_type[j] == CrustType::Continental;
+                best = Some((id, q, z, continental));
             }
         }
-        let Some((plate, q, z_under)) = best else {
+        let Some((plate, q, z_under, continental)) = best else {
             continue;
         };
         // Its edifice: the nearest on this plate within r/2, else a new one.
@@ -387,7 +393,12 @@ fn build_and_subside(
             .filter(|&(_, a)| a <= 0.5 * r_rad)
             .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
         let built = near.map_or(0.0, |(k, _)| list[k].1.built_km);
-        let dz_km = (s.uplift_mm_per_yr * dt).min(s.max_height_km - built).max(0.0);
+        let cap_km = if continental {
+            CONTINENTAL_HEIGHT_FRACTION * s.max_height_km
+        } else {
+            s.max_height_km
+        };
+        let dz_km = (s.uplift_mm_per_yr * dt).min(cap_km - built).max(0.0);
         footprint(&mesh, crust, plate, q, r_rad, &mut marks, &mut samples);
         for &(i, d) in &samples {
             let dz = (dz_km * profile(d / r_rad)) as f32;

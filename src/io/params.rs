@@ -746,28 +746,28 @@ pub(crate) fn parse_toml_table(text: &str) -> Result<toml::Table, ParamError> {
 
 /// Reads a parameter file as text, with errors naming the path (missing, a folder, unreadable).
 pub(crate) fn read_param_file(path: &Path) -> Result<String, ParamError> {
-        let owned = || path.to_path_buf();
-        match std::fs::metadata(path) {
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                return Err(ParamError::FileNotFound { path: owned() });
-            }
-            Err(source) => {
-                return Err(ParamError::Unreadable {
-                    path: owned(),
-                    source,
-                });
-            }
-            Ok(m) if m.is_dir() => return Err(ParamError::IsDirectory { path: owned() }),
-            Ok(_) => {}
+    let owned = || path.to_path_buf();
+    match std::fs::metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(ParamError::FileNotFound { path: owned() });
         }
-        let text = std::fs::read_to_string(path).map_err(|source| match source.kind() {
-            std::io::ErrorKind::NotFound => ParamError::FileNotFound { path: owned() },
-            std::io::ErrorKind::IsADirectory => ParamError::IsDirectory { path: owned() },
-            _ => ParamError::Unreadable {
+        Err(source) => {
+            return Err(ParamError::Unreadable {
                 path: owned(),
                 source,
-            },
-        })?;
+            });
+        }
+        Ok(m) if m.is_dir() => return Err(ParamError::IsDirectory { path: owned() }),
+        Ok(_) => {}
+    }
+    let text = std::fs::read_to_string(path).map_err(|source| match source.kind() {
+        std::io::ErrorKind::NotFound => ParamError::FileNotFound { path: owned() },
+        std::io::ErrorKind::IsADirectory => ParamError::IsDirectory { path: owned() },
+        _ => ParamError::Unreadable {
+            path: owned(),
+            source,
+        },
+    })?;
     Ok(text)
 }
 

@@ -219,7 +219,10 @@ impl PluginParams {
                 format!(" [{}]", e.spec.unit)
             };
             let (lo, hi) = e.bounds();
-            out.push_str(&format!("# {}{} (range {}..{})\n", e.spec.doc, unit, lo, hi));
+            out.push_str(&format!(
+                "# {}{} (range {}..{})\n",
+                e.spec.doc, unit, lo, hi
+            ));
             out.push_str(&format!("{} = {}\n", e.spec.name, e.value));
         }
         out
@@ -407,7 +410,8 @@ mod tests {
     #[test]
     fn set_checks_kind_range_and_key() {
         let mut p = registry();
-        p.set("plugins.demo.radius_km", ParamValue::Int(200)).unwrap();
+        p.set("plugins.demo.radius_km", ParamValue::Int(200))
+            .unwrap();
         assert_eq!(p.f64_or("plugins.demo.radius_km", 0.0), 200.0);
         let e = p
             .set("plugins.demo.radius_km", ParamValue::Float(0.5))
@@ -416,9 +420,13 @@ mod tests {
             e.to_string(),
             "parameter \"plugins.demo.radius_km\" = 0.5 is out of range: allowed 1.0..=1000.0"
         );
-        let e = p.set("plugins.demo.count", ParamValue::Float(2.5)).unwrap_err();
+        let e = p
+            .set("plugins.demo.count", ParamValue::Float(2.5))
+            .unwrap_err();
         assert!(matches!(e, ParamError::NotIntegral { .. }), "{e:?}");
-        let e = p.set("plugins.demo.radius", ParamValue::Float(2.0)).unwrap_err();
+        let e = p
+            .set("plugins.demo.radius", ParamValue::Float(2.0))
+            .unwrap_err();
         assert_eq!(
             e.to_string(),
             "unknown parameter \"plugins.demo.radius\"; did you mean \"plugins.demo.radius_km\"?"
@@ -431,14 +439,23 @@ mod tests {
         let mut p = registry();
         p.set("plugins.demo.count", ParamValue::Int(7)).unwrap();
         let text = p.to_commented_toml();
-        assert!(text.contains("[plugins.demo]\n# Radius. [km] (range 1.0..1000.0)\nradius_km = 100.0\n"), "{text}");
+        assert!(
+            text.contains(
+                "[plugins.demo]\n# Radius. [km] (range 1.0..1000.0)\nradius_km = 100.0\n"
+            ),
+            "{text}"
+        );
         let mut q = registry();
-        q.apply(&PluginConfig::from_toml_str(&text).unwrap()).unwrap();
+        q.apply(&PluginConfig::from_toml_str(&text).unwrap())
+            .unwrap();
         assert_eq!(q, p);
         // The core parameters ignore the plugin tables, and the plugin config the core ones.
         let both = format!("[planet]\nsamples = 2000\n{text}");
         assert_eq!(
-            crate::io::params::Params::from_toml_str(&both).unwrap().planet.samples,
+            crate::io::params::Params::from_toml_str(&both)
+                .unwrap()
+                .planet
+                .samples,
             2000
         );
         let cfg = PluginConfig::from_toml_str("[plugins.demo]\ncount = 11\n").unwrap();
@@ -449,7 +466,12 @@ mod tests {
         );
         assert_eq!(q, p, "a refused config changes nothing");
         let cfg = PluginConfig::from_toml_str("[plugins.demo]\nradius_km = \"far\"\n").unwrap();
-        assert!(q.apply(&cfg).unwrap_err().to_string().contains("must be a number"));
+        assert!(
+            q.apply(&cfg)
+                .unwrap_err()
+                .to_string()
+                .contains("must be a number")
+        );
         let cfg = PluginConfig::from_toml_str("[plugins.other]\nx = 1\n").unwrap();
         assert!(matches!(q.apply(&cfg), Err(ParamError::UnknownKey { .. })));
         assert!(matches!(

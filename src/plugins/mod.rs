@@ -158,12 +158,9 @@ impl PhenomenonAppExt for App {
         enabled_by_default: bool,
     ) -> &mut Self {
         self.init_resource::<Phenomena>();
-        self.world_mut().resource_mut::<Phenomena>().register_with_default(
-            name,
-            set,
-            description,
-            enabled_by_default,
-        );
+        self.world_mut()
+            .resource_mut::<Phenomena>()
+            .register_with_default(name, set, description, enabled_by_default);
         self
     }
 }

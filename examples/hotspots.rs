@@ -40,7 +40,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut spots: Vec<Hotspot> = world.query::<&Hotspot>().iter(world).copied().collect();
     spots.sort_by_key(|h| h.index);
     let mut edifices: Vec<Edifice> = world.query::<&Edifice>().iter(world).copied().collect();
-    edifices.sort_by(|a, b| (a.hotspot, a.age_my.to_bits()).cmp(&(b.hotspot, b.age_my.to_bits())));
+    edifices.sort_by_key(|e| (e.hotspot, e.age_my.to_bits()));
     for h in &spots {
         let chain: Vec<&Edifice> = edifices.iter().filter(|e| e.hotspot == h.index).collect();
         println!(

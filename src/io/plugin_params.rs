@@ -91,7 +91,7 @@ impl PluginParams {
                 | (ParamKind::Int, ParamValue::Int(_))
                 | (ParamKind::Bool, ParamValue::Bool(_))
         );
-        if !kind_ok || !(spec.min <= spec.max) {
+        if !kind_ok || spec.min.partial_cmp(&spec.max).is_none_or(|o| o.is_gt()) {
             return Err(format!(
                 "plugin parameter \"{}\" has a default of the wrong kind or an empty range",
                 spec.key

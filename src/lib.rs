@@ -8,6 +8,7 @@
 
 pub mod commands;
 pub mod components;
+pub mod contrib;
 pub mod geometry;
 pub mod io;
 pub mod plugins;
@@ -26,15 +27,25 @@ pub mod prelude {
         SubductionFront, Terrane,
     };
     pub use crate::geometry::SphereMesh;
-    pub use crate::io::params::{ParamError, ParamValue, Params};
+    pub use crate::geometry::spherical::angle_between;
+    pub use crate::io::params::{ParamError, ParamKind, ParamSpec, ParamValue, Params};
+    pub use crate::io::plugin_params::{
+        PluginConfig, PluginParam, PluginParams, PluginParamsAppExt,
+    };
+    pub use crate::io::save::{SaveAppExt, SaveSection, SectionReader, SectionWriter};
     pub use crate::plugins::{
         AfterResample, AfterResampleSystems, AgingPlugin, CollisionPlugin, DiagnosticsPlugin,
         DriftPlugin, ErosionPlugin, OceanicCrustPlugin, PhenomenonAppExt, ResamplePlugin,
         ResampleSystems, RiftingPlugin, SlabPullPlugin, SubductionPlugin, TectonicPlugins,
         TectonicStep, TectonicSystems, TerranePlugin,
     };
-    pub use crate::resources::{Crust, CrustType, Orogeny, Phenomena, phenomenon_enabled};
+    pub use crate::random::{SimRng, hash3, mix64, unit_f64, unit_vector};
+    pub use crate::resources::{
+        Crust, CrustType, Orogeny, Phenomena, PhenomenonInfo, ResampleRequest, SimClock,
+        phenomenon_enabled,
+    };
     pub use crate::simulation::{SimError, Simulation};
     pub use bevy_app::{App, Plugin, PluginGroup};
     pub use bevy_ecs::prelude::*;
+    pub use glam::{DQuat, DVec3};
 }

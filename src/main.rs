@@ -10,6 +10,7 @@ use tectonic_planets::Simulation;
 use tectonic_planets::commands::{Command as Cmd, Outcome, Script};
 use tectonic_planets::io::maps::{Raster, write_all_maps};
 use tectonic_planets::io::params::{ParamValue, Params};
+use tectonic_planets::io::plugin_params::PluginConfig;
 use tectonic_planets::io::save::{self, CommandHistory};
 use tectonic_planets::io::summary::{CrustSampler, summarize};
 use tectonic_planets::plugins::TectonicSystems;
@@ -78,6 +79,9 @@ struct ResumeArgs {
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
+    /// Phenomena to switch on or off from now on (the save keeps the switches otherwise).
+    #[command(flatten)]
+    switches: SwitchArgs,
 }
 
 #[derive(Args)]
@@ -113,12 +117,22 @@ struct PlanetArgs {
     /// Initial fraction of the surface covered by continental crust.
     #[arg(long)]
     continental_fraction: Option<f64>,
-    /// Phenomena to switch off, comma-separated (see `planet plugins`).
-    #[arg(long, value_delimiter = ',')]
-    disable: Vec<String>,
+    #[command(flatten)]
+    switches: SwitchArgs,
     /// Worker threads (default: all cores). Results do not depend on it.
     #[arg(long)]
     threads: Option<usize>,
+}
+
+/// Phenomena to switch on or off.
+#[derive(Args, Clone)]
+struct SwitchArgs {
+    /// Phenomena to switch off, comma-separated (see `planet plugins`).
+    #[arg(long, value_delimiter = ',')]
+    disable: Vec<String>,
+    /// Phenomena to switch on, comma-separated (e.g. `hotspots`, off by default).
+    #[arg(long, value_delimiter = ',')]
+    enable: Vec<String>,
 }
 
 #[derive(Args)]
@@ -176,25 +190,30 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Generate(a) => generate(a),
         Command::Params { config } => {
-            let params = match config {
-                Some(p) => Params::load(&p)?,
+            let params = match &config {
+                Some(p) => Params::load(p)?,
                 None => Params::default(),
             };
+            let mut registry = tiny_sim()?;
+            if let Some(p) = &config {
+                registry.apply_plugin_config(&PluginConfig::load(p)?)?;
+            }
             print!("{}", params.to_commented_toml());
+            let plugin_toml = registry.plugin_params().to_commented_toml();
+            if !plugin_toml.is_empty() {
+                print!("\n# Parameters declared by plugins (see `planet plugins`).\n{plugin_toml}");
+            }
             Ok(())
         }
         Command::Plugins => {
-            let mut params = Params::default();
-            params.planet.samples = 1000;
-            params.init.plates = 2;
-            let sim = Simulation::new(params)?;
-            println!("{:<16} {:<12} {:<4} description", "name", "set", "on");
+            let sim = tiny_sim()?;
+            println!("{:<16} {:<12} {:<8} description", "name", "set", "default");
             for p in sim.phenomena() {
                 println!(
-                    "{:<16} {:<12} {:<4} {}",
+                    "{:<16} {:<12} {:<8} {}",
                     p.name,
                     p.set.name(),
-                    if p.enabled { "yes" } else { "no" },
+                    if p.default_enabled { "on" } else { "off" },
                     p.description
                 );
             }
@@ -204,6 +223,38 @@ fn run(cli: Cli) -> Result<()> {
         Command::Resume(a) => resume(a),
         Command::Export(a) => export(a),
     }
+}
+
+/// The smallest simulation, to list what the plugins register.
+fn tiny_sim() -> Result<Simulation> {
+    let mut params = Params::default();
+    params.planet.samples = 1000;
+    params.init.plates = 2;
+    Ok(Simulation::new(params)?)
+}
+
+/// Switches phenomena on (`enable`) and off (`disable`); a name in both is refused.
+fn apply_switches(sim: &mut Simulation, enable: &[String], disable: &[String]) -> Result<()> {
+    let names = |v: &[String]| -> Vec<String> {
+        v.iter()
+            .map(|n| n.trim().to_string())
+            .filter(|n| !n.is_empty())
+            .collect()
+    };
+    let (on, off) = (names(enable), names(disable));
+    if let Some(n) = on.iter().find(|n| off.contains(n)) {
+        bail!("phenomenon \"{n}\" is both enabled and disabled");
+    }
+    // Through the command API, so that the switches are in the history and replay.
+    for (names, enabled) in [(&on, true), (&off, false)] {
+        for n in names {
+            sim.apply(&Cmd::SetPhenomenon {
+                name: n.clone(),
+                enabled,
+            })?;
+        }
+    }
+    Ok(())
 }
 
 /// Parameters from the config file and the command line, validated.
@@ -252,15 +303,10 @@ fn build_sim(a: &PlanetArgs) -> Result<Simulation> {
     setup_threads(a.threads)?;
     let params = load_params(a)?;
     let mut sim = Simulation::new(params)?;
-    for name in &a.disable {
-        let name = name.trim();
-        if !name.is_empty() {
-            sim.apply(&Cmd::SetPhenomenon {
-                name: name.to_string(),
-                enabled: false,
-            })?;
-        }
+    if let Some(path) = &a.config {
+        sim.apply_plugin_config(&PluginConfig::load(path)?)?;
     }
+    apply_switches(&mut sim, &a.switches.enable, &a.switches.disable)?;
     Ok(sim)
 }
 
@@ -529,6 +575,7 @@ fn resume(a: ResumeArgs) -> Result<()> {
     }
     let started = Instant::now();
     let mut sim = save::load_from_file(&a.file)?;
+    apply_switches(&mut sim, &a.switches.enable, &a.switches.disable)?;
     let step = sim.clock().step;
     sim.world_mut()
         .resource_mut::<CommandHistory>()

@@ -21,6 +21,7 @@ use bevy_ecs::prelude::*;
 use crate::components::{Plate, PlateBounds, PlateFrame, PlateMesh, PlateMotion, PlateStats};
 use crate::geometry::{MeshError, SphereMesh};
 use crate::io::params::{ParamError, Params};
+use crate::io::plugin_params::{PluginConfig, PluginParams};
 use crate::plugins::{TectonicPlugins, TectonicSchedulePlugin, TectonicStep};
 use crate::random::StableHasher;
 use crate::resources::{
@@ -88,6 +89,10 @@ impl Simulation {
         app.add_plugins(plugins);
         app.finish();
         app.cleanup();
+        app.init_resource::<PluginParams>();
+        if let Some(e) = app.world().resource::<PluginParams>().invalid_declaration() {
+            return Err(SimError::BadArgument(e.to_string()));
+        }
         let world = app.world_mut();
         for p in &plates {
             world.spawn(Plate::bundle(p.id, p.motion));
@@ -116,6 +121,7 @@ impl Simulation {
         app.add_plugins(plugins);
         app.finish();
         app.cleanup();
+        app.init_resource::<PluginParams>();
         Self { app }
     }
 
@@ -182,6 +188,23 @@ impl Simulation {
             .resource_mut::<Phenomena>()
             .set_enabled(name, enabled)
             .map_err(SimError::UnknownPhenomenon)
+    }
+
+    /// The parameters declared by plugins, with their current values.
+    pub fn plugin_params(&self) -> &PluginParams {
+        self.app.world().resource::<PluginParams>()
+    }
+
+    /// The plugin parameters, to change (every change is checked; see [`PluginParams::set`]).
+    pub fn plugin_params_mut(&mut self) -> Mut<'_, PluginParams> {
+        self.app.world_mut().resource_mut::<PluginParams>()
+    }
+
+    /// Applies the `[plugins.<plugin>]` tables of a config; unknown keys, wrong kinds and
+    /// out-of-range values are refused with the key, the value and the range.
+    pub fn apply_plugin_config(&mut self, config: &PluginConfig) -> Result<(), SimError> {
+        self.plugin_params_mut().apply(config)?;
+        Ok(())
     }
 
     /// Every registered phenomenon and whether it is on.

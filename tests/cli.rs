@@ -205,3 +205,104 @@ fn output_path_that_is_a_file_is_refused() {
         &["occupied", "not a folder"],
     );
 }
+
+#[test]
+fn plugins_are_listed_switched_and_configured() {
+    let out = planet().arg("plugins").output().expect("run planet");
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("hotspots "))
+        .unwrap_or_else(|| panic!("hotspots not listed: {text}"));
+    assert!(line.contains("aging") && line.contains("off"), "{line}");
+    assert!(
+        text.lines()
+            .any(|l| l.starts_with("erosion ") && l.contains(" on ")),
+        "{text}"
+    );
+    let out = planet().arg("params").output().expect("run planet");
+    let params = String::from_utf8_lossy(&out.stdout);
+    assert!(params.contains("[plugins.hotspots]\n"), "{params}");
+    assert!(params.contains("\nradius_km = 150.0\n"), "{params}");
+
+    let dir = temp_dir("plugins");
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("bad.toml");
+    std::fs::write(&cfg, "[plugins.hotspots]\nradius_km = 5000\n").unwrap();
+    let cfg_s = cfg.to_str().unwrap();
+    fails_with(
+        &[
+            "generate",
+            "--samples",
+            "2000",
+            "--my",
+            "0",
+            "--config",
+            cfg_s,
+        ],
+        &["plugins.hotspots.radius_km", "5000", "10.0..=2000.0"],
+    );
+    fails_with(
+        &["params", "--config", cfg_s],
+        &["plugins.hotspots.radius_km"],
+    );
+    fails_with(
+        &["generate", "--samples", "2000", "--enable", "hotspot"],
+        &["hotspot", "hotspots"],
+    );
+    fails_with(
+        &[
+            "generate",
+            "--samples",
+            "2000",
+            "--enable",
+            "hotspots",
+            "--disable",
+            "hotspots",
+        ],
+        &["both enabled and disabled"],
+    );
+    // A run with hotspots on, saved, resumes with them (state and parameters from the save).
+    std::fs::write(&cfg, "[plugins.hotspots]\nradius_km = 600\ncount = 4\n").unwrap();
+    let save = dir.join("h.planet");
+    let out = planet()
+        .args([
+            "generate",
+            "--samples",
+            "4000",
+            "--plates",
+            "8",
+            "--my",
+            "20",
+            "--quiet",
+        ])
+        .args(["--enable", "hotspots", "--config", cfg_s, "--out"])
+        .arg(dir.join("out"))
+        .arg("--save")
+        .arg(&save)
+        .output()
+        .expect("run planet");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = planet()
+        .args(["resume", "--my", "4", "--quiet", "--disable", "erosion"])
+        .arg(&save)
+        .output()
+        .expect("run planet");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let sim = tectonic_planets::io::save::load_from_file(&save).unwrap();
+    let on = |n: &str| sim.phenomena().iter().any(|p| p.name == n && p.enabled);
+    assert!(on("hotspots") && !on("erosion"));
+    assert_eq!(
+        sim.plugin_params().get("plugins.hotspots.radius_km"),
+        Some(tectonic_planets::io::params::ParamValue::Float(600.0))
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

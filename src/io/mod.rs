@@ -2,5 +2,6 @@
 
 pub mod maps;
 pub mod params;
+pub mod plugin_params;
 pub mod save;
 pub mod summary;

@@ -502,7 +502,7 @@ define_params! {
 const MAX_SUGGEST_LEN: usize = 256;
 
 /// Levenshtein edit distance between two strings, counted in `char`s.
-fn levenshtein(a: &str, b: &str) -> usize {
+pub(crate) fn levenshtein(a: &str, b: &str) -> usize {
     let b: Vec<char> = b.chars().collect();
     let mut prev: Vec<usize> = (0..=b.len()).collect();
     let mut cur: Vec<usize> = vec![0; b.len() + 1];
@@ -518,7 +518,7 @@ fn levenshtein(a: &str, b: &str) -> usize {
 }
 
 /// Largest edit distance at which a suggestion is offered for `s`.
-fn suggest_threshold(s: &str) -> usize {
+pub(crate) fn suggest_threshold(s: &str) -> usize {
     2.max(s.chars().count() / 4)
 }
 
@@ -573,7 +573,7 @@ fn suggest_top_level(name: &str) -> Option<String> {
 }
 
 /// Short description of a TOML value for error messages.
-fn describe_toml(v: &toml::Value) -> String {
+pub(crate) fn describe_toml(v: &toml::Value) -> String {
     match v {
         toml::Value::String(s) => {
             let shown: String = s.chars().take(40).collect();
@@ -616,7 +616,7 @@ fn unknown_key(key: &str) -> ParamError {
 }
 
 /// Converts `value` to the kind of `spec` and checks finiteness and range.
-fn check_value(
+pub(crate) fn check_value(
     spec: &ParamSpec,
     bounds: (ParamValue, ParamValue),
     value: ParamValue,
@@ -691,7 +691,7 @@ fn check_value(
 }
 
 /// Converts a TOML value into a `ParamValue` for `spec` (type check only).
-fn from_toml_value(spec: &ParamSpec, v: &toml::Value) -> Result<ParamValue, ParamError> {
+pub(crate) fn from_toml_value(spec: &ParamSpec, v: &toml::Value) -> Result<ParamValue, ParamError> {
     match (spec.kind, v) {
         (ParamKind::Float, toml::Value::Integer(i)) => Ok(ParamValue::Float(*i as f64)),
         (ParamKind::Int, toml::Value::Integer(i)) => u64::try_from(*i)
@@ -726,6 +726,55 @@ fn line_column(text: &str, offset: usize) -> (usize, usize) {
         }
     }
     (line, column)
+}
+
+/// The top-level TOML table that holds plugin parameters (`[plugins.<plugin>]`); [`Params`]
+/// skips it, [`PluginParams`](crate::io::plugin_params::PluginParams) reads it.
+pub const PLUGINS_TABLE: &str = "plugins";
+
+/// Parses TOML text into a table; syntax errors give their line and column.
+pub(crate) fn parse_toml_table(text: &str) -> Result<toml::Table, ParamError> {
+    toml::from_str(text).map_err(|e: toml::de::Error| {
+        let (line, column) = match e.span() {
+            Some(span) => {
+                let (l, c) = line_column(text, span.start);
+                (Some(l), Some(c))
+            }
+            None => (None, None),
+        };
+        ParamError::MalformedToml {
+            line,
+            column,
+            message: e.to_string().trim_end().to_string(),
+        }
+    })
+}
+
+/// Reads a parameter file as text, with errors naming the path (missing, a folder, unreadable).
+pub(crate) fn read_param_file(path: &Path) -> Result<String, ParamError> {
+    let owned = || path.to_path_buf();
+    match std::fs::metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(ParamError::FileNotFound { path: owned() });
+        }
+        Err(source) => {
+            return Err(ParamError::Unreadable {
+                path: owned(),
+                source,
+            });
+        }
+        Ok(m) if m.is_dir() => return Err(ParamError::IsDirectory { path: owned() }),
+        Ok(_) => {}
+    }
+    let text = std::fs::read_to_string(path).map_err(|source| match source.kind() {
+        std::io::ErrorKind::NotFound => ParamError::FileNotFound { path: owned() },
+        std::io::ErrorKind::IsADirectory => ParamError::IsDirectory { path: owned() },
+        _ => ParamError::Unreadable {
+            path: owned(),
+            source,
+        },
+    })?;
+    Ok(text)
 }
 
 impl Params {
@@ -803,22 +852,13 @@ impl Params {
     /// Parses parameters from TOML text. Starts from the defaults; the text may give
     /// any subset of sections and keys. The result is fully validated.
     pub fn from_toml_str(text: &str) -> Result<Params, ParamError> {
-        let table: toml::Table = toml::from_str(text).map_err(|e| {
-            let (line, column) = match e.span() {
-                Some(span) => {
-                    let (l, c) = line_column(text, span.start);
-                    (Some(l), Some(c))
-                }
-                None => (None, None),
-            };
-            ParamError::MalformedToml {
-                line,
-                column,
-                message: e.to_string().trim_end().to_string(),
-            }
-        })?;
+        let table = parse_toml_table(text)?;
         let mut params = Params::default();
         for (section, value) in &table {
+            if section == PLUGINS_TABLE {
+                // Plugin parameters: read by `PluginParams` (src/io/plugin_params.rs).
+                continue;
+            }
             let is_section = SECTIONS.contains(&section.as_str());
             let entries = match value {
                 toml::Value::Table(t) if is_section => t,
@@ -857,29 +897,7 @@ impl Params {
 
     /// Reads and parses a TOML parameter file (see [`Params::from_toml_str`]).
     pub fn load(path: &Path) -> Result<Params, ParamError> {
-        let owned = || path.to_path_buf();
-        match std::fs::metadata(path) {
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                return Err(ParamError::FileNotFound { path: owned() });
-            }
-            Err(source) => {
-                return Err(ParamError::Unreadable {
-                    path: owned(),
-                    source,
-                });
-            }
-            Ok(m) if m.is_dir() => return Err(ParamError::IsDirectory { path: owned() }),
-            Ok(_) => {}
-        }
-        let text = std::fs::read_to_string(path).map_err(|source| match source.kind() {
-            std::io::ErrorKind::NotFound => ParamError::FileNotFound { path: owned() },
-            std::io::ErrorKind::IsADirectory => ParamError::IsDirectory { path: owned() },
-            _ => ParamError::Unreadable {
-                path: owned(),
-                source,
-            },
-        })?;
-        Params::from_toml_str(&text)
+        Params::from_toml_str(&read_param_file(path)?)
     }
 
     /// Prints every section and key as TOML, each key preceded by a comment

@@ -274,6 +274,7 @@ impl Plugin for CoreSavePlugin {
             app.register_save_section(s);
         }
         app.register_save_section(convergence_section());
+        app.register_save_section(crate::io::plugin_params::plugin_params_section());
     }
 }
 

@@ -130,6 +130,16 @@ pub trait PhenomenonAppExt {
         set: TectonicSystems,
         description: &'static str,
     ) -> &mut Self;
+    /// Adds `name` to the [`Phenomena`] registry in `set`, on or off in a new simulation
+    /// (`--enable NAME` or [`Simulation::set_enabled`](crate::Simulation::set_enabled) turns an
+    /// off-by-default phenomenon on).
+    fn register_phenomenon_with_default(
+        &mut self,
+        name: &'static str,
+        set: TectonicSystems,
+        description: &'static str,
+        enabled_by_default: bool,
+    ) -> &mut Self;
 }
 
 impl PhenomenonAppExt for App {
@@ -139,10 +149,20 @@ impl PhenomenonAppExt for App {
         set: TectonicSystems,
         description: &'static str,
     ) -> &mut Self {
+        self.register_phenomenon_with_default(name, set, description, true)
+    }
+
+    fn register_phenomenon_with_default(
+        &mut self,
+        name: &'static str,
+        set: TectonicSystems,
+        description: &'static str,
+        enabled_by_default: bool,
+    ) -> &mut Self {
         self.init_resource::<Phenomena>();
         self.world_mut()
             .resource_mut::<Phenomena>()
-            .register(name, set, description);
+            .register_with_default(name, set, description, enabled_by_default);
         self
     }
 }
@@ -411,7 +431,8 @@ impl Plugin for ResamplePlugin {
     }
 }
 
-/// The built-in phenomena, in schedule order. Disable one with
+/// The built-in phenomena, in schedule order, and the contributed ones (written against the
+/// prelude only, in [`crate::contrib`]; hotspots start switched off). Disable one with
 /// `TectonicPlugins.build().disable::<ErosionPlugin>()` and add your own in its place.
 pub struct TectonicPlugins;
 
@@ -429,5 +450,6 @@ impl PluginGroup for TectonicPlugins {
             .add(TerranePlugin)
             .add(OceanicCrustPlugin)
             .add(DiagnosticsPlugin)
+            .add(crate::contrib::HotspotPlugin)
     }
 }

@@ -17,6 +17,8 @@ pub struct PhenomenonInfo {
     pub description: &'static str,
     /// Whether its systems run.
     pub enabled: bool,
+    /// Whether it is on in a new simulation (what `planet plugins` shows as the default).
+    pub default_enabled: bool,
 }
 
 /// All registered phenomena in registration order (a resource).
@@ -33,12 +35,24 @@ impl Phenomena {
         set: TectonicSystems,
         description: &'static str,
     ) {
+        self.register_with_default(name, set, description, true);
+    }
+    /// Adds a phenomenon that starts on (`enabled_by_default`) or off. Registering a name twice
+    /// keeps the first entry.
+    pub fn register_with_default(
+        &mut self,
+        name: &'static str,
+        set: TectonicSystems,
+        description: &'static str,
+        enabled_by_default: bool,
+    ) {
         if !self.entries.iter().any(|e| e.name == name) {
             self.entries.push(PhenomenonInfo {
                 name,
                 set,
                 description,
-                enabled: true,
+                enabled: enabled_by_default,
+                default_enabled: enabled_by_default,
             });
         }
     }

@@ -621,6 +621,44 @@ fn peak_rss_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
+fn median(v: &[f64]) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// Rifts the largest plate into two, `n` times (a step after each, which resamples), and returns
+/// the wall time of each rift itself (partition, motions, plate geometry), ms.
+fn bench_rifts(sim: &mut Simulation, n: usize) -> Result<Vec<f64>> {
+    use tectonic_planets::components::{Plate, PlateStats};
+    use tectonic_planets::systems::rifting::RiftLog;
+    let mut out = Vec::new();
+    for _ in 0..n {
+        let world = sim.world_mut();
+        let largest = world
+            .query::<(&Plate, &PlateStats)>()
+            .iter(world)
+            .max_by(|a, b| {
+                a.1.area_km2
+                    .total_cmp(&b.1.area_km2)
+                    .then(b.0.id.0.cmp(&a.0.id.0))
+            })
+            .map(|(p, _)| p.id.0);
+        let Some(id) = largest else { break };
+        let rift = Cmd::RiftAt {
+            plate: tectonic_planets::commands::PlateRef::Id(id),
+            fragments: 2,
+        };
+        if sim.apply(&rift).is_ok()
+            && let Some(e) = sim.world().resource::<RiftLog>().events.last()
+        {
+            out.push(e.elapsed_ms);
+        }
+        sim.step()?;
+    }
+    Ok(out)
+}
+
 fn bench(a: BenchArgs) -> Result<()> {
     let t0 = Instant::now();
     let mut sim = build_sim(&a.planet)?;
@@ -655,6 +693,7 @@ fn bench(a: BenchArgs) -> Result<()> {
         sim.request_resample();
         sim.step()?;
     }
+    let rift_ms = bench_rifts(&mut sim, 3)?;
     println!("median per step, by system set:");
     let mut per_step_sum = 0.0;
     for set in TectonicSystems::ALL {
@@ -682,6 +721,12 @@ fn bench(a: BenchArgs) -> Result<()> {
         sim.timings()
             .median_ms("after_resample")
             .unwrap_or(f64::NAN)
+    );
+    println!(
+        "{:<28} {:>10.1} ms  ({} rifts of the largest plate into 2)",
+        "one rift (median)",
+        median(&rift_ms),
+        rift_ms.len()
     );
     let state = sim.state_bytes();
     println!(

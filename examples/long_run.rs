@@ -11,16 +11,26 @@ use tectonic_planets::prelude::*;
 use tectonic_planets::resources::Sutures;
 use tectonic_planets::systems::rifting::{RiftCause, RiftLog};
 
-/// Peak resident memory (VmHWM), bytes.
-fn peak_rss() -> u64 {
+/// A memory figure of this process from /proc/self/status (`VmHWM:` peak, `VmRSS:` now), bytes.
+fn status_bytes(key: &str) -> u64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
         .and_then(|s| {
             s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
+                .find(|l| l.starts_with(key))
                 .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
         })
         .map_or(0, |kb| kb * 1024)
+}
+
+/// Peak resident memory (VmHWM), bytes.
+fn peak_rss() -> u64 {
+    status_bytes("VmHWM:")
+}
+
+/// Resident memory now (VmRSS), bytes.
+fn rss() -> u64 {
+    status_bytes("VmRSS:")
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -74,13 +84,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     .iter()
                     .filter(|e| e.cause == RiftCause::Random)
                     .count();
+                let state_mb = sim.state_bytes() as f64 / 1e6;
                 let lost = sim
                     .world()
                     .resource::<tectonic_planets::systems::resample::ResampleWork>()
                     .continental_subducted_total_km2
                     / sim.mesh().total_area_km2();
                 println!(
-                    "seed {seed} step {step:>5} ({:>5.0} My): plates {:>3}, continental {:.3} ({:+.1}%), land {:.3}, max {:.2} km, rifts {random}, collisions {}, forced under {lost:.3}, peak {:.0} MB",
+                    "seed {seed} step {step:>5} ({:>5.0} My): plates {:>3}, continental {:.3} ({:+.1}%), land {:.3}, max {:.2} km, rifts {random}, collisions {}, forced under {lost:.3}, state {:.1} MB, resident {:.0} MB, peak {:.0} MB",
                     sim.time_my(),
                     s.plates,
                     s.continental_fraction,
@@ -88,6 +99,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     s.land_fraction,
                     s.elevation_range_km.1,
                     sim.world().resource::<Sutures>().total,
+                    state_mb,
+                    rss() as f64 / 1e6,
                     peak_rss() as f64 / 1e6,
                 );
             }

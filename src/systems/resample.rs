@@ -982,6 +982,25 @@ pub fn resample_rebuild(world: &mut World) {
     world
         .resource_mut::<StepTimings>()
         .record("after_resample", t_after.elapsed());
+    release_free_memory();
+}
+
+/// Hands the allocator's free pages back to the system. A resampling frees and reallocates many
+/// buffers of changing sizes on several threads; with glibc's per-thread arenas the freed space
+/// fragments and the resident size crept up by about 20% over 1000 steps while the live state
+/// stayed flat (measured with `examples/long_run`). Trimming after each resampling (well under a
+/// millisecond at 100,000 samples) keeps the resident size flat. Elsewhere a no-op.
+pub fn release_free_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        unsafe extern "C" {
+            fn malloc_trim(pad: usize) -> i32;
+        }
+        // SAFETY: malloc_trim only returns free heap memory to the OS; it has no preconditions.
+        unsafe {
+            malloc_trim(0);
+        }
+    }
 }
 
 /// Brings plate entities in line with `Crust::plate`: updates mesh, bounds and stats, despawns

@@ -8,6 +8,7 @@
 
 pub mod components;
 pub mod geometry;
+pub mod gpu;
 pub mod io;
 pub mod plugins;
 pub mod random;
@@ -24,6 +25,7 @@ pub mod prelude {
         SubductionFront, Terrane,
     };
     pub use crate::geometry::SphereMesh;
+    pub use crate::gpu::{BackendChoice, ComputeBackend};
     pub use crate::io::params::{ParamError, ParamValue, Params};
     pub use crate::plugins::{
         AfterResample, AfterResampleSystems, AgingPlugin, CollisionPlugin, DiagnosticsPlugin,

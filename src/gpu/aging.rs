@@ -33,7 +33,11 @@ impl AgingKernel {
     pub(crate) fn new(device: &wgpu::Device) -> Self {
         Self {
             pipeline: compute_pipeline(device, "aging", WGSL),
-            uniforms: uniform_buffer(device, "aging uniforms", std::mem::size_of::<AgingUniforms>()),
+            uniforms: uniform_buffer(
+                device,
+                "aging uniforms",
+                std::mem::size_of::<AgingUniforms>(),
+            ),
             bind_group: None,
         }
     }

@@ -459,7 +459,10 @@ impl GpuContext {
         self.upload(&b.crust_type, bytemuck::cast_slice(&crust.crust_type));
         self.upload(&b.age_my, bytemuck::cast_slice(&crust.age_my));
         self.upload(&b.orogeny, bytemuck::cast_slice(&crust.orogeny));
-        self.upload(&b.orogeny_age_my, bytemuck::cast_slice(&crust.orogeny_age_my));
+        self.upload(
+            &b.orogeny_age_my,
+            bytemuck::cast_slice(&crust.orogeny_age_my),
+        );
         self.upload(&b.fold_dir, bytemuck::cast_slice(&crust.fold_dir));
         self.crust = Some(b);
         self.crust_synced = host_tick;

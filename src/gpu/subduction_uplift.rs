@@ -285,7 +285,11 @@ pub fn read_back(ctx: &mut GpuContext, crust: &mut Crust) -> Result<(), GpuError
             message: "the crust is not on the device".into(),
         });
     };
-    ctx.download(KERNEL, &z, bytemuck::cast_slice_mut(&mut crust.elevation_km))?;
+    ctx.download(
+        KERNEL,
+        &z,
+        bytemuck::cast_slice_mut(&mut crust.elevation_km),
+    )?;
     ctx.download(
         KERNEL,
         &oga,

@@ -268,7 +268,12 @@ fn use_backend(sim: &mut Simulation, choice: BackendChoice) -> Result<()> {
     let note = sim
         .set_backend(choice)
         .context("could not start the GPU compute backend")?;
-    if choice == BackendChoice::Auto && sim.backend() == ComputeBackend::Cpu {
+    // Falling back for want of any adapter is worth a warning; a machine with only a software
+    // adapter (lavapipe) is the ordinary CPU case.
+    if choice == BackendChoice::Auto
+        && sim.backend() == ComputeBackend::Cpu
+        && !note.starts_with(tectonic_planets::gpu::SOFTWARE_ONLY)
+    {
         tracing::warn!("{note}");
     } else {
         tracing::info!("{note}");

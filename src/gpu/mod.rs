@@ -40,6 +40,9 @@ pub fn shader_source(kernel_wgsl: &str) -> String {
     format!("{COMMON_WGSL}\n{kernel_wgsl}")
 }
 
+/// How the note of [`select_backend`] starts when `auto` found only a software adapter.
+pub const SOFTWARE_ONLY: &str = "no hardware GPU";
+
 /// Which compute backend the user asked for (`--backend`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum BackendChoice {
@@ -215,7 +218,7 @@ pub fn select_backend(choice: BackendChoice) -> Result<SelectedBackend, GpuError
         if choice == BackendChoice::Auto {
             let why = match adapters.first() {
                 Some(a) => format!(
-                    "no hardware GPU (only the software adapter {}); compute backend: cpu",
+                    "{SOFTWARE_ONLY} (only the software adapter {}); compute backend: cpu",
                     a.get_info().name
                 ),
                 None => format!(

@@ -10,6 +10,7 @@ pub mod commands;
 pub mod components;
 pub mod contrib;
 pub mod geometry;
+pub mod gpu;
 pub mod io;
 pub mod plugins;
 pub mod random;
@@ -28,6 +29,7 @@ pub mod prelude {
     };
     pub use crate::geometry::SphereMesh;
     pub use crate::geometry::spherical::angle_between;
+    pub use crate::gpu::{BackendChoice, ComputeBackend};
     pub use crate::io::params::{ParamError, ParamKind, ParamSpec, ParamValue, Params};
     pub use crate::io::plugin_params::{
         PluginConfig, PluginParam, PluginParams, PluginParamsAppExt,

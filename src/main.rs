@@ -8,6 +8,7 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use tectonic_planets::Simulation;
 use tectonic_planets::commands::{Command as Cmd, Outcome, Script};
+use tectonic_planets::gpu::{BackendChoice, ComputeBackend, GpuContext};
 use tectonic_planets::io::maps::{Raster, write_all_maps};
 use tectonic_planets::io::params::{ParamValue, Params};
 use tectonic_planets::io::plugin_params::PluginConfig;
@@ -76,6 +77,9 @@ struct ResumeArgs {
     /// Worker threads (default: all cores). Results do not depend on it.
     #[arg(long)]
     threads: Option<usize>,
+    /// Compute backend: auto, gpu or cpu (see `generate --help`).
+    #[arg(long, default_value = "auto")]
+    backend: BackendChoice,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
@@ -122,6 +126,10 @@ struct PlanetArgs {
     /// Worker threads (default: all cores). Results do not depend on it.
     #[arg(long)]
     threads: Option<usize>,
+    /// Compute backend: auto (a hardware GPU if any, else the CPU), gpu (any wgpu adapter,
+    /// software ones included), cpu.
+    #[arg(long, default_value = "auto")]
+    backend: BackendChoice,
 }
 
 /// Phenomena to switch on or off.
@@ -303,11 +311,30 @@ fn build_sim(a: &PlanetArgs) -> Result<Simulation> {
     setup_threads(a.threads)?;
     let params = load_params(a)?;
     let mut sim = Simulation::new(params)?;
+    use_backend(&mut sim, a.backend)?;
     if let Some(path) = &a.config {
         sim.apply_plugin_config(&PluginConfig::load(path)?)?;
     }
     apply_switches(&mut sim, &a.switches.enable, &a.switches.disable)?;
     Ok(sim)
+}
+
+/// Installs the compute backend; says which one when it is not the one asked for.
+fn use_backend(sim: &mut Simulation, choice: BackendChoice) -> Result<()> {
+    let note = sim
+        .set_backend(choice)
+        .context("could not start the GPU compute backend")?;
+    // Falling back for want of any adapter is worth a warning; a machine with only a software
+    // adapter (lavapipe) is the ordinary CPU case.
+    if choice == BackendChoice::Auto
+        && sim.backend() == ComputeBackend::Cpu
+        && !note.starts_with(tectonic_planets::gpu::SOFTWARE_ONLY)
+    {
+        tracing::warn!("{note}");
+    } else {
+        tracing::info!("{note}");
+    }
+    Ok(())
 }
 
 /// The command line as typed, for the command history of saves.
@@ -576,6 +603,7 @@ fn resume(a: ResumeArgs) -> Result<()> {
     let started = Instant::now();
     let mut sim = save::load_from_file(&a.file)?;
     apply_switches(&mut sim, &a.switches.enable, &a.switches.disable)?;
+    use_backend(&mut sim, a.backend)?;
     let step = sim.clock().step;
     sim.world_mut()
         .resource_mut::<CommandHistory>()
@@ -665,11 +693,12 @@ fn bench(a: BenchArgs) -> Result<()> {
     let build = t0.elapsed();
     let n = sim.mesh().len();
     println!(
-        "planet bench: {} samples, {} plates, {} steps, {} threads",
+        "planet bench: {} samples, {} plates, {} steps, {} threads, backend {}",
         n,
         sim.stats().plates,
         a.steps,
-        rayon::current_num_threads()
+        rayon::current_num_threads(),
+        backend_name(&sim)
     );
     let ms = |d: Option<Duration>| d.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
     println!("{:<28} {:>10.1} ms", "mesh", ms(sim.timings().last("mesh")));
@@ -684,11 +713,13 @@ fn bench(a: BenchArgs) -> Result<()> {
         build.as_secs_f64() * 1e3
     );
     let mut step_ms = Vec::new();
+    let traffic0 = gpu_traffic(&sim);
     for _ in 0..a.steps {
         let s = Instant::now();
         sim.step()?;
         step_ms.push(s.elapsed().as_secs_f64() * 1e3);
     }
+    let traffic1 = gpu_traffic(&sim);
     for _ in 0..a.resamplings {
         sim.request_resample();
         sim.step()?;
@@ -728,6 +759,18 @@ fn bench(a: BenchArgs) -> Result<()> {
         median(&rift_ms),
         rift_ms.len()
     );
+    if let (Some(t0), Some(t1)) = (traffic0, traffic1) {
+        let steps = a.steps.max(1) as f64;
+        println!(
+            "{:<28} {:>10.2} MB up, {:.2} MB down, {:.1} dispatches, {} full crust uploads in {} steps",
+            "GPU traffic per step",
+            (t1.uploaded_bytes - t0.uploaded_bytes) as f64 / steps / 1e6,
+            (t1.downloaded_bytes - t0.downloaded_bytes) as f64 / steps / 1e6,
+            (t1.dispatches - t0.dispatches) as f64 / steps,
+            t1.crust_uploads - t0.crust_uploads,
+            a.steps
+        );
+    }
     let state = sim.state_bytes();
     println!(
         "{:<28} {:>10.1} MB  ({:.0} bytes/sample)",
@@ -744,6 +787,19 @@ fn bench(a: BenchArgs) -> Result<()> {
         );
     }
     bench_saves(&mut sim)
+}
+
+/// The backend's name for the bench header: `cpu`, or `gpu (adapter, type)`.
+fn backend_name(sim: &Simulation) -> String {
+    match sim.world().get_resource::<GpuContext>() {
+        Some(g) => format!("gpu ({}, {:?})", g.adapter.name, g.adapter.device_type),
+        None => "cpu".into(),
+    }
+}
+
+/// The GPU traffic counters, on the GPU backend.
+fn gpu_traffic(sim: &Simulation) -> Option<tectonic_planets::gpu::GpuTraffic> {
+    sim.world().get_resource::<GpuContext>().map(|g| g.traffic)
 }
 
 /// Times a save (encode, compress, write, sync) and a load (read, check, decompress, rebuild the

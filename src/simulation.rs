@@ -54,6 +54,9 @@ pub enum SimError {
     /// A time or count argument that makes no sense.
     #[error("{0}")]
     BadArgument(String),
+    /// The GPU backend could not be set up, or a kernel failed.
+    #[error(transparent)]
+    Gpu(#[from] crate::gpu::GpuError),
 }
 
 /// A running planet: the ECS world and its step schedule.
@@ -141,6 +144,14 @@ impl Simulation {
     /// Runs one time step (one run of the [`TectonicStep`] schedule).
     pub fn step(&mut self) -> Result<(), SimError> {
         self.app.world_mut().run_schedule(TectonicStep);
+        if let Some(e) = self
+            .app
+            .world_mut()
+            .get_resource_mut::<crate::gpu::GpuContext>()
+            .and_then(|mut g| g.failure.take())
+        {
+            return Err(SimError::Gpu(e));
+        }
         let world = self.app.world();
         if let Some(e) = world.resource::<CrustHealth>().0.clone() {
             return Err(SimError::NonFinite {
@@ -149,6 +160,34 @@ impl Simulation {
             });
         }
         Ok(())
+    }
+
+    /// Chooses the compute backend of the per-sample kernels (see [`crate::gpu`]); returns a
+    /// line saying which one runs and, under [`BackendChoice::Auto`](crate::gpu::BackendChoice),
+    /// why the CPU was chosen. Takes effect from the next step; results on the CPU backend do not
+    /// change.
+    pub fn set_backend(&mut self, choice: crate::gpu::BackendChoice) -> Result<String, SimError> {
+        let selected = crate::gpu::select_backend(choice)?;
+        let world = self.app.world_mut();
+        world.insert_resource(selected.backend);
+        match selected.context {
+            Some(ctx) => {
+                world.insert_resource(ctx);
+            }
+            None => {
+                world.remove_resource::<crate::gpu::GpuContext>();
+            }
+        }
+        Ok(selected.note)
+    }
+
+    /// The compute backend in use.
+    pub fn backend(&self) -> crate::gpu::ComputeBackend {
+        self.app
+            .world()
+            .get_resource::<crate::gpu::ComputeBackend>()
+            .copied()
+            .unwrap_or_default()
     }
 
     /// Runs `n` steps.

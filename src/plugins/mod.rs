@@ -199,7 +199,8 @@ impl Plugin for TectonicSchedulePlugin {
             .init_resource::<crate::resources::ConvergenceField>()
             .init_resource::<crate::resources::OverridePairs>()
             .init_resource::<crate::resources::TerraneField>()
-            .init_resource::<crate::resources::Sutures>();
+            .init_resource::<crate::resources::Sutures>()
+            .init_resource::<crate::gpu::ComputeBackend>();
         for set in TectonicSystems::ALL {
             app.configure_sets(
                 TectonicStep,

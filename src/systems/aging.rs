@@ -4,26 +4,60 @@
 use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 
+use crate::gpu::{GpuContext, run_or_record};
 use crate::io::params::Params;
 use crate::resources::{Crust, Orogeny};
 
-/// Ages the crust by one time step.
-pub fn age_crust(params: Res<Params>, mut crust: ResMut<Crust>) {
-    let dt = params.time.time_step_my as f32;
-    let crust = &mut *crust;
-    crust
-        .age_my
+/// The CPU kernel (reference of `shaders/aging.wgsl`): ages every sample by `dt_my`, in place.
+pub fn aging_cpu(age_my: &mut [f32], orogeny_age_my: &mut [f32], orogeny: &[Orogeny], dt_my: f32) {
+    age_my
         .par_iter_mut()
         .with_min_len(4096)
-        .for_each(|a| *a += dt);
-    crust
-        .orogeny_age_my
+        .for_each(|a| *a += dt_my);
+    orogeny_age_my
         .par_iter_mut()
-        .zip(crust.orogeny.par_iter())
+        .zip(orogeny.par_iter())
         .with_min_len(4096)
         .for_each(|(a, &o)| {
             if o != Orogeny::None {
-                *a += dt;
+                *a += dt_my;
             }
         });
+}
+
+/// Ages the crust by one time step, on the GPU when a [`GpuContext`] is installed, with
+/// [`aging_cpu`] otherwise.
+pub fn age_crust(params: Res<Params>, mut crust: ResMut<Crust>, gpu: Option<ResMut<GpuContext>>) {
+    let dt = params.time.time_step_my as f32;
+    if let Some(mut gpu) = gpu {
+        let tick = crust.last_changed();
+        let done = run_or_record(&mut gpu, |g| {
+            g.sync_crust(&crust, Some(tick))?;
+            crate::gpu::aging::aging_dispatch(g, dt)?;
+            let bufs = g
+                .crust_buffers()
+                .map(|b| (b.age_my.clone(), b.orogeny_age_my.clone()));
+            if let Some((age, oga)) = bufs {
+                let crust = &mut *crust;
+                g.download("aging", &age, bytemuck::cast_slice_mut(&mut crust.age_my))?;
+                g.download(
+                    "aging",
+                    &oga,
+                    bytemuck::cast_slice_mut(&mut crust.orogeny_age_my),
+                )?;
+            }
+            Ok(())
+        });
+        if done {
+            gpu.mark_crust_synced(crust.last_changed());
+            return;
+        }
+    }
+    let crust = &mut *crust;
+    aging_cpu(
+        &mut crust.age_my,
+        &mut crust.orogeny_age_my,
+        &crust.orogeny,
+        dt,
+    );
 }

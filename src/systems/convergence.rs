@@ -48,6 +48,7 @@ use crate::components::{
     Terrane,
 };
 use crate::geometry::SphereMesh;
+use crate::gpu::{GpuContext, run_or_record};
 use crate::io::params::Params;
 use crate::resources::convergence::NONE;
 use crate::resources::{
@@ -619,31 +620,79 @@ pub fn track_fronts(
     }
 }
 
-/// Subduction uplift on overriding plates, fold directions, Andean orogeny, and trenches on
-/// subducting plates (see the module documentation).
-pub fn subduction_uplift(
-    params: Res<Params>,
-    fp: Res<FrontPoints>,
-    field: Res<ConvergenceField>,
-    mut crust: ResMut<Crust>,
-) {
-    if fp.is_empty() || field.overriding_point.len() != crust.len() {
-        return;
+/// The constants of one subduction-uplift step (from the parameters).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UpliftConstants {
+    /// r_s: subduction distance, km.
+    pub rs: f64,
+    /// r_c: control distance, km.
+    pub rc: f64,
+    /// δt, My.
+    pub dt: f64,
+    /// u0, km/My.
+    pub u0: f64,
+    /// v0: maximum plate speed, km/My.
+    pub v0: f64,
+    /// z_t: trench elevation, km.
+    pub z_t: f64,
+    /// z_c: maximum continental elevation, km.
+    pub z_c: f64,
+    /// z_a: abyssal elevation, km.
+    pub z_a: f64,
+    /// β: fold weight.
+    pub beta: f64,
+    /// Trench width, km.
+    pub wt: f64,
+    /// Trench deepening rate per step.
+    pub rate: f64,
+    /// z_r: ridge elevation, km.
+    pub z_r: f64,
+}
+
+impl UpliftConstants {
+    /// The constants for `params`.
+    pub fn new(params: &Params) -> Self {
+        let s = &params.subduction;
+        Self {
+            rs: s.distance_km,
+            rc: s.control_distance_km,
+            dt: params.time.time_step_my,
+            u0: s.uplift_mm_per_yr,
+            v0: params.plates.max_speed_mm_per_yr,
+            z_t: params.ocean.trench_elevation_km,
+            z_c: params.continent.max_elevation_km,
+            z_a: params.ocean.abyssal_elevation_km,
+            beta: s.fold_weight,
+            wt: s.trench_width_km,
+            rate: s.trench_rate,
+            z_r: params.ocean.ridge_elevation_km,
+        }
     }
-    let s = &params.subduction;
-    let (rs, rc) = (s.distance_km, s.control_distance_km);
-    let dt = params.time.time_step_my;
-    let u0 = s.uplift_mm_per_yr; // km/My
-    let v0 = params.plates.max_speed_mm_per_yr;
-    let (z_t, z_c, z_a) = (
-        params.ocean.trench_elevation_km,
-        params.continent.max_elevation_km,
-        params.ocean.abyssal_elevation_km,
-    );
-    let beta = s.fold_weight;
-    let (wt, rate) = (s.trench_width_km, s.trench_rate);
-    let z_r = params.ocean.ridge_elevation_km;
-    let crust = &mut *crust;
+}
+
+/// The CPU kernel (reference of `shaders/subduction_uplift.wgsl`): one step of subduction
+/// uplift, fold directions, Andean orogeny and trenches on every sample, in place. `field` must
+/// have one entry per sample of `crust`.
+pub fn subduction_uplift_cpu(
+    k: &UpliftConstants,
+    fp: &FrontPoints,
+    field: &ConvergenceField,
+    crust: &mut Crust,
+) {
+    let UpliftConstants {
+        rs,
+        rc,
+        dt,
+        u0,
+        v0,
+        z_t,
+        z_c,
+        z_a,
+        beta,
+        wt,
+        rate,
+        z_r,
+    } = *k;
     (
         crust.elevation_km.par_iter_mut(),
         crust.orogeny.par_iter_mut(),
@@ -697,6 +746,41 @@ pub fn subduction_uplift(
                 }
             }
         });
+}
+
+/// Subduction uplift on overriding plates, fold directions, Andean orogeny, and trenches on
+/// subducting plates (see the module documentation), on the GPU when a [`GpuContext`] is
+/// installed, with [`subduction_uplift_cpu`] otherwise.
+pub fn subduction_uplift(
+    params: Res<Params>,
+    fp: Res<FrontPoints>,
+    field: Res<ConvergenceField>,
+    mut crust: ResMut<Crust>,
+    gpu: Option<ResMut<GpuContext>>,
+) {
+    if fp.is_empty() || field.overriding_point.len() != crust.len() {
+        return;
+    }
+    let k = UpliftConstants::new(&params);
+    if let Some(mut gpu) = gpu {
+        let (tick, field_tick) = (crust.last_changed(), field.last_changed());
+        let done = run_or_record(&mut gpu, |g| {
+            g.sync_crust(&crust, Some(tick))?;
+            crate::gpu::subduction_uplift::subduction_uplift_dispatch(
+                g,
+                &k,
+                &fp,
+                &field,
+                Some(field_tick),
+            )?;
+            crate::gpu::subduction_uplift::read_back(g, &mut crust)
+        });
+        if done {
+            gpu.mark_crust_synced(crust.last_changed());
+            return;
+        }
+    }
+    subduction_uplift_cpu(&k, &fp, &field, &mut crust);
 }
 
 /// Slab pull: each subducting plate's Euler pole turns toward its active fronts.

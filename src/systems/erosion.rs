@@ -13,6 +13,7 @@
 use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 
+use crate::gpu::{GpuContext, run_or_record};
 use crate::io::params::Params;
 use crate::resources::{Crust, CrustType};
 
@@ -42,12 +43,12 @@ pub fn erode_sample(z: f32, crust_type: CrustType, p: &ErosionRates) -> f32 {
 /// The per-step constants of [`erode_sample`].
 #[derive(Clone, Copy, Debug)]
 pub struct ErosionRates {
-    z_c: f64,
-    z_a: f64,
-    z_t: f64,
-    erosion_km: f64,
-    damping_factor: f64,
-    sediment_km: f64,
+    pub(crate) z_c: f64,
+    pub(crate) z_a: f64,
+    pub(crate) z_t: f64,
+    pub(crate) erosion_km: f64,
+    pub(crate) damping_factor: f64,
+    pub(crate) sediment_km: f64,
 }
 
 impl ErosionRates {
@@ -67,14 +68,40 @@ impl ErosionRates {
     }
 }
 
-/// Applies one step of erosion, damping and accretion to every sample.
-pub fn erode(params: Res<Params>, mut crust: ResMut<Crust>) {
-    let rates = ErosionRates::new(&params);
-    let crust = &mut *crust;
-    crust
-        .elevation_km
+/// The CPU kernel (reference of `shaders/erosion.wgsl`): one step of erosion, damping and
+/// accretion on every sample, in place.
+pub fn erosion_cpu(elevation_km: &mut [f32], crust_type: &[CrustType], rates: &ErosionRates) {
+    elevation_km
         .par_iter_mut()
-        .zip(crust.crust_type.par_iter())
+        .zip(crust_type.par_iter())
         .with_min_len(4096)
-        .for_each(|(z, &t)| *z = erode_sample(*z, t, &rates));
+        .for_each(|(z, &t)| *z = erode_sample(*z, t, rates));
+}
+
+/// Applies one step of erosion, damping and accretion to every sample, on the GPU when a
+/// [`GpuContext`] is installed, with [`erosion_cpu`] otherwise.
+pub fn erode(params: Res<Params>, mut crust: ResMut<Crust>, gpu: Option<ResMut<GpuContext>>) {
+    let rates = ErosionRates::new(&params);
+    if let Some(mut gpu) = gpu {
+        let tick = crust.last_changed();
+        let done = run_or_record(&mut gpu, |g| {
+            g.sync_crust(&crust, Some(tick))?;
+            crate::gpu::erosion::erosion_dispatch(g, &rates)?;
+            let b = g.crust_buffers().map(|b| b.elevation_km.clone());
+            if let Some(b) = b {
+                g.download(
+                    "erosion",
+                    &b,
+                    bytemuck::cast_slice_mut(&mut crust.elevation_km),
+                )?;
+            }
+            Ok(())
+        });
+        if done {
+            gpu.mark_crust_synced(crust.last_changed());
+            return;
+        }
+    }
+    let crust = &mut *crust;
+    erosion_cpu(&mut crust.elevation_km, &crust.crust_type, &rates);
 }

@@ -1,0 +1,564 @@
+//! The GPU compute backend (wgpu): adapter selection, the [`GpuContext`] resource (device,
+//! queue, kernel pipelines, the crust buffers resident on the device) and the
+//! [`ComputeBackend`] choice the systems read. One host module per kernel
+//! (`shaders/<kernel>.wgsl`), each with its CPU reference `<kernel>_cpu`.
+//!
+//! What stays on the device, and when it is synced (the crust is also read by CPU systems every
+//! step — fronts, collisions, terranes, diagnostics, resampling — so it cannot live only there):
+//! - The crust fields the kernels touch (elevation, crust type, age, orogeny, orogeny age, fold
+//!   direction) are device buffers kept between steps. A kernel uploads them only when the host
+//!   [`Crust`] changed since the last sync (bevy change ticks): after a resampling, a collision,
+//!   a load, or any CPU system that wrote the crust. In a step without such a change nothing of
+//!   the crust goes up.
+//! - After each kernel, the fields it wrote are read back into the host [`Crust`] (CPU systems
+//!   later in the step and the next step read them), and the device copy is marked in sync.
+//! - The convergence field (distances to the fronts) goes up once per resampling; per step only
+//!   the front-point table (32 bytes a point) and the kernels' uniforms go up.
+//!
+//! [`GpuTraffic`] counts the bytes both ways; `planet bench --backend gpu` prints them per step.
+
+pub mod aging;
+pub mod erosion;
+pub mod subduction_uplift;
+
+use std::sync::{Arc, Mutex};
+
+use bevy_ecs::change_detection::Tick;
+use bevy_ecs::prelude::*;
+
+use crate::resources::Crust;
+
+/// Threads per workgroup of every per-sample kernel (`WORKGROUP_SIZE` in
+/// `shaders/common/bytes.wgsl`).
+pub const WORKGROUP_SIZE: u32 = 256;
+
+/// Shared WGSL prepended to every kernel (the files of `shaders/common/`, in name order).
+pub const COMMON_WGSL: &str = include_str!("../../shaders/common/bytes.wgsl");
+
+/// The full source of a kernel: [`COMMON_WGSL`] followed by the kernel's own file.
+pub fn shader_source(kernel_wgsl: &str) -> String {
+    format!("{COMMON_WGSL}\n{kernel_wgsl}")
+}
+
+/// How the note of [`select_backend`] starts when `auto` found only a software adapter.
+pub const SOFTWARE_ONLY: &str = "no hardware GPU";
+
+/// Which compute backend the user asked for (`--backend`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BackendChoice {
+    /// A hardware GPU when there is one, the CPU otherwise (software adapters are not used).
+    #[default]
+    Auto,
+    /// Any wgpu adapter, a software one (Mesa's lavapipe) included; an error without one.
+    Gpu,
+    /// The CPU (rayon) kernels.
+    Cpu,
+}
+
+impl std::str::FromStr for BackendChoice {
+    type Err = GpuError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "auto" => Ok(Self::Auto),
+            "gpu" => Ok(Self::Gpu),
+            "cpu" => Ok(Self::Cpu),
+            other => Err(GpuError::UnknownBackend(other.to_string())),
+        }
+    }
+}
+
+/// The backend the per-sample kernels run on (a resource; the CPU unless a [`GpuContext`] was
+/// installed with [`crate::Simulation::set_backend`]).
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ComputeBackend {
+    /// rayon kernels on the host.
+    #[default]
+    Cpu,
+    /// wgpu compute kernels; the [`GpuContext`] resource is present.
+    Gpu,
+}
+
+/// What went wrong with the GPU backend.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum GpuError {
+    /// `--backend` was given an unknown name.
+    #[error("unknown compute backend `{0}`: expected auto, gpu or cpu")]
+    UnknownBackend(String),
+    /// No wgpu adapter at all.
+    #[error(
+        "no GPU adapter found (wgpu sees none{0}); on Linux without a GPU install Mesa's \
+         lavapipe (apt-get install mesa-vulkan-drivers libvulkan1), or use --backend cpu"
+    )]
+    NoAdapter(String),
+    /// The adapter would not open a device.
+    #[error("could not open the GPU device on {adapter}: {message}")]
+    Device {
+        /// Adapter name.
+        adapter: String,
+        /// wgpu's message.
+        message: String,
+    },
+    /// A buffer, pipeline or dispatch failed (validation error, lost device, failed mapping).
+    #[error("GPU kernel `{kernel}` failed: {message}")]
+    Kernel {
+        /// The kernel (or buffer operation).
+        kernel: &'static str,
+        /// What failed.
+        message: String,
+    },
+    /// A problem too large for one dispatch.
+    #[error("{0}")]
+    TooLarge(String),
+}
+
+/// Bytes that crossed the bus, both ways, since the context was made.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GpuTraffic {
+    /// Host to device, bytes.
+    pub uploaded_bytes: u64,
+    /// Device to host, bytes.
+    pub downloaded_bytes: u64,
+    /// Kernel dispatches.
+    pub dispatches: u64,
+    /// Full uploads of the resident crust.
+    pub crust_uploads: u64,
+}
+
+/// The crust fields resident on the device (see the module documentation).
+pub struct CrustBuffers {
+    /// Samples.
+    pub len: usize,
+    /// Elevation, f32 per sample, km.
+    pub elevation_km: wgpu::Buffer,
+    /// Crust type, u8 per sample packed four to a word.
+    pub crust_type: wgpu::Buffer,
+    /// Crust age, f32 per sample, My.
+    pub age_my: wgpu::Buffer,
+    /// Orogeny, u8 per sample packed four to a word.
+    pub orogeny: wgpu::Buffer,
+    /// Orogeny age, f32 per sample, My.
+    pub orogeny_age_my: wgpu::Buffer,
+    /// Fold direction, three f32 per sample, plate frame.
+    pub fold_dir: wgpu::Buffer,
+}
+
+/// The wgpu device and everything the kernels keep on it (a resource, present only on the GPU
+/// backend).
+#[derive(Resource)]
+pub struct GpuContext {
+    /// The device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// The adapter it came from.
+    pub adapter: wgpu::AdapterInfo,
+    errors: Arc<Mutex<Vec<String>>>,
+    pub(crate) erosion: erosion::ErosionKernel,
+    pub(crate) aging: aging::AgingKernel,
+    pub(crate) uplift: subduction_uplift::UpliftKernel,
+    crust: Option<CrustBuffers>,
+    crust_synced: Option<Tick>,
+    staging: Option<wgpu::Buffer>,
+    /// Bytes moved and dispatches made.
+    pub traffic: GpuTraffic,
+    /// The first failure of a kernel run by a system; the simulation stops with it.
+    pub failure: Option<GpuError>,
+}
+
+/// The outcome of [`select_backend`].
+pub struct SelectedBackend {
+    /// The backend to use.
+    pub backend: ComputeBackend,
+    /// The context, for the GPU backend.
+    pub context: Option<GpuContext>,
+    /// A line for the user: which adapter, or why the CPU.
+    pub note: String,
+}
+
+/// Blocks on a future (wgpu's adapter and device requests complete at once on native backends).
+fn block_on<F: std::future::Future>(f: F) -> F::Output {
+    pollster::block_on(f)
+}
+
+fn type_rank(t: wgpu::DeviceType) -> u8 {
+    match t {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Other => 3,
+        wgpu::DeviceType::Cpu => 4,
+    }
+}
+
+/// Picks the backend for `choice`: `Cpu` always gives the CPU; `Gpu` the best adapter wgpu finds
+/// (hardware first, then software such as lavapipe) or an error; `Auto` a hardware adapter, or
+/// the CPU with a note saying why. The `WGPU_BACKEND` environment variable limits the wgpu
+/// backends searched, as in wgpu.
+pub fn select_backend(choice: BackendChoice) -> Result<SelectedBackend, GpuError> {
+    if choice == BackendChoice::Cpu {
+        return Ok(SelectedBackend {
+            backend: ComputeBackend::Cpu,
+            context: None,
+            note: "compute backend: cpu".into(),
+        });
+    }
+    let desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    let backends = desc.backends;
+    let instance = wgpu::Instance::new(desc);
+    let mut adapters = block_on(instance.enumerate_adapters(backends));
+    adapters.sort_by_key(|a| type_rank(a.get_info().device_type));
+    let hardware = adapters
+        .iter()
+        .position(|a| a.get_info().device_type != wgpu::DeviceType::Cpu);
+    let pick = match choice {
+        BackendChoice::Auto => hardware,
+        _ => (!adapters.is_empty()).then_some(0),
+    };
+    let Some(k) = pick else {
+        if choice == BackendChoice::Auto {
+            let why = match adapters.first() {
+                Some(a) => format!(
+                    "{SOFTWARE_ONLY} (only the software adapter {}); compute backend: cpu",
+                    a.get_info().name
+                ),
+                None => format!(
+                    "{}; compute backend: cpu",
+                    GpuError::NoAdapter(format!(" for backends {backends:?}"))
+                ),
+            };
+            return Ok(SelectedBackend {
+                backend: ComputeBackend::Cpu,
+                context: None,
+                note: why,
+            });
+        }
+        return Err(GpuError::NoAdapter(format!(" for backends {backends:?}")));
+    };
+    let adapter = adapters.swap_remove(k);
+    let context = GpuContext::new(&adapter)?;
+    let info = &context.adapter;
+    let note = format!(
+        "compute backend: gpu ({}, {:?}, {:?})",
+        info.name, info.device_type, info.backend
+    );
+    Ok(SelectedBackend {
+        backend: ComputeBackend::Gpu,
+        context: Some(context),
+        note,
+    })
+}
+
+impl GpuContext {
+    /// Opens a device on `adapter` and builds every kernel's pipeline.
+    pub fn new(adapter: &wgpu::Adapter) -> Result<Self, GpuError> {
+        let info = adapter.get_info();
+        // Everything the adapter offers (the large storage bindings matter at 4M samples).
+        let limits = adapter.limits();
+        let (device, queue) = block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("tectonic compute device"),
+            required_features: wgpu::Features::empty(),
+            required_limits: limits,
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::Device {
+            adapter: info.name.clone(),
+            message: e.to_string(),
+        })?;
+        let errors: Arc<Mutex<Vec<String>>> = Arc::default();
+        let sink = errors.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+            if let Ok(mut v) = sink.lock() {
+                v.push(e.to_string());
+            }
+        }));
+        let erosion = erosion::ErosionKernel::new(&device);
+        let aging = aging::AgingKernel::new(&device);
+        let uplift = subduction_uplift::UpliftKernel::new(&device);
+        let ctx = Self {
+            device,
+            queue,
+            adapter: info,
+            errors,
+            erosion,
+            aging,
+            uplift,
+            crust: None,
+            crust_synced: None,
+            staging: None,
+            traffic: GpuTraffic::default(),
+            failure: None,
+        };
+        ctx.check("pipelines")?;
+        Ok(ctx)
+    }
+
+    /// The first wgpu error recorded since the last check, as a [`GpuError`] naming `kernel`.
+    pub(crate) fn check(&self, kernel: &'static str) -> Result<(), GpuError> {
+        let mut v = self.errors.lock().map_err(|_| GpuError::Kernel {
+            kernel,
+            message: "error log poisoned".into(),
+        })?;
+        if let Some(first) = v.first().cloned() {
+            v.clear();
+            return Err(GpuError::Kernel {
+                kernel,
+                message: first,
+            });
+        }
+        Ok(())
+    }
+
+    /// A storage buffer of `bytes` bytes (rounded up to 4), usable as copy source and target.
+    pub fn storage_buffer(&self, label: &str, bytes: usize) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: (bytes.max(4).div_ceil(4) * 4) as u64,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_DST
+                | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// Writes `data` at the start of `buffer` (padded with zeros to a multiple of 4 bytes).
+    pub fn upload(&mut self, buffer: &wgpu::Buffer, data: &[u8]) {
+        if data.is_empty() {
+            return;
+        }
+        if data.len().is_multiple_of(4) {
+            self.queue.write_buffer(buffer, 0, data);
+        } else {
+            let mut padded = data.to_vec();
+            padded.resize(data.len().div_ceil(4) * 4, 0);
+            self.queue.write_buffer(buffer, 0, &padded);
+        }
+        self.traffic.uploaded_bytes += data.len() as u64;
+    }
+
+    /// Copies the first `out.len()` bytes of `buffer` into `out` (waits for the device).
+    pub fn download(
+        &mut self,
+        kernel: &'static str,
+        buffer: &wgpu::Buffer,
+        out: &mut [u8],
+    ) -> Result<(), GpuError> {
+        if out.is_empty() {
+            return Ok(());
+        }
+        let size = (out.len().div_ceil(4) * 4) as u64;
+        if self.staging.as_ref().is_none_or(|s| s.size() < size) {
+            self.staging = Some(self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("readback staging"),
+                size,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }));
+        }
+        let Some(staging) = self.staging.as_ref() else {
+            return Err(GpuError::Kernel {
+                kernel,
+                message: "no staging buffer".into(),
+            });
+        };
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("readback"),
+            });
+        enc.copy_buffer_to_buffer(buffer, 0, staging, 0, size);
+        self.queue.submit([enc.finish()]);
+        let (tx, rx) = std::sync::mpsc::channel();
+        staging.map_async(wgpu::MapMode::Read, 0..size, move |r| {
+            let _ = tx.send(r);
+        });
+        let fail = |message: String| GpuError::Kernel { kernel, message };
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| fail(e.to_string()))?;
+        match rx.recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(fail(e.to_string())),
+            Err(e) => return Err(fail(e.to_string())),
+        }
+        {
+            let view = staging
+                .get_mapped_range(0..size)
+                .map_err(|e| fail(e.to_string()))?;
+            out.copy_from_slice(&view[..out.len()]);
+        }
+        staging.unmap();
+        self.traffic.downloaded_bytes += out.len() as u64;
+        self.check(kernel)
+    }
+
+    /// Runs one compute pass of `pipeline` with `bind_group` over `threads` threads (1-D work
+    /// folded into rows of at most 65,535 workgroups); returns the row stride in threads that the
+    /// shader must use to rebuild its index.
+    pub(crate) fn dispatch(
+        &mut self,
+        kernel: &'static str,
+        pipeline: &wgpu::ComputePipeline,
+        bind_group: &wgpu::BindGroup,
+        threads: u32,
+    ) -> Result<(), GpuError> {
+        let (x, y) = workgroups(threads)?;
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some(kernel),
+            });
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(kernel),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, bind_group, &[]);
+            pass.dispatch_workgroups(x, y, 1);
+        }
+        self.queue.submit([enc.finish()]);
+        self.traffic.dispatches += 1;
+        self.check(kernel)
+    }
+
+    /// The resident crust buffers (after [`Self::sync_crust`]).
+    pub fn crust_buffers(&self) -> Option<&CrustBuffers> {
+        self.crust.as_ref()
+    }
+
+    /// Makes the resident buffers hold `crust`: allocates them for its size and uploads every
+    /// field unless the device copy is already in sync with the host change tick `host_tick`
+    /// (pass `None` to force the upload).
+    pub fn sync_crust(&mut self, crust: &Crust, host_tick: Option<Tick>) -> Result<(), GpuError> {
+        let n = crust.len();
+        if self.crust.as_ref().is_some_and(|b| b.len == n)
+            && host_tick.is_some()
+            && self.crust_synced == host_tick
+        {
+            return Ok(());
+        }
+        if self.crust.as_ref().is_none_or(|b| b.len != n) {
+            let b = CrustBuffers {
+                len: n,
+                elevation_km: self.storage_buffer("crust elevation_km", 4 * n),
+                crust_type: self.storage_buffer("crust crust_type (u8 x4)", n),
+                age_my: self.storage_buffer("crust age_my", 4 * n),
+                orogeny: self.storage_buffer("crust orogeny (u8 x4)", n),
+                orogeny_age_my: self.storage_buffer("crust orogeny_age_my", 4 * n),
+                fold_dir: self.storage_buffer("crust fold_dir", 12 * n),
+            };
+            self.crust = Some(b);
+            self.erosion.forget_bind_group();
+            self.aging.forget_bind_group();
+            self.uplift.forget_bind_groups();
+        }
+        let Some(b) = self.crust.take() else {
+            return Err(GpuError::Kernel {
+                kernel: "crust upload",
+                message: "no crust buffers".into(),
+            });
+        };
+        self.upload(&b.elevation_km, bytemuck::cast_slice(&crust.elevation_km));
+        self.upload(&b.crust_type, bytemuck::cast_slice(&crust.crust_type));
+        self.upload(&b.age_my, bytemuck::cast_slice(&crust.age_my));
+        self.upload(&b.orogeny, bytemuck::cast_slice(&crust.orogeny));
+        self.upload(
+            &b.orogeny_age_my,
+            bytemuck::cast_slice(&crust.orogeny_age_my),
+        );
+        self.upload(&b.fold_dir, bytemuck::cast_slice(&crust.fold_dir));
+        self.crust = Some(b);
+        self.crust_synced = host_tick;
+        self.traffic.crust_uploads += 1;
+        self.check("crust upload")
+    }
+
+    /// Records that the device copy of the crust equals the host copy as of change tick `tick`.
+    pub fn mark_crust_synced(&mut self, tick: Tick) {
+        self.crust_synced = Some(tick);
+    }
+
+    /// Forgets the sync state, so the next kernel uploads the whole crust.
+    pub fn invalidate_crust(&mut self) {
+        self.crust_synced = None;
+    }
+}
+
+/// Workgroup counts (x, y) for `threads` threads.
+pub(crate) fn workgroups(threads: u32) -> Result<(u32, u32), GpuError> {
+    let groups = threads.div_ceil(WORKGROUP_SIZE).max(1);
+    let x = groups.min(ROW_GROUPS);
+    let y = groups.div_ceil(ROW_GROUPS);
+    if y > ROW_GROUPS {
+        return Err(GpuError::TooLarge(format!(
+            "{threads} threads do not fit in one dispatch"
+        )));
+    }
+    Ok((x, y))
+}
+
+/// Workgroups per dispatch row; the shader's `row_stride` is this times [`WORKGROUP_SIZE`].
+pub(crate) const ROW_GROUPS: u32 = 65_535;
+
+/// Threads per dispatch row (the `row_stride` uniform of every kernel).
+pub const ROW_STRIDE: u32 = ROW_GROUPS * WORKGROUP_SIZE;
+
+/// A compute pipeline for `wgsl` (prefixed with [`COMMON_WGSL`]) with entry point `main` and
+/// the layout derived from the shader.
+pub(crate) fn compute_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    wgsl: &str,
+) -> wgpu::ComputePipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(shader_source(wgsl).into()),
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: None,
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
+
+/// A uniform buffer holding `data`.
+pub(crate) fn uniform_buffer(device: &wgpu::Device, label: &str, bytes: usize) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes as u64,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+/// A bind group entry for a whole buffer.
+pub(crate) fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: buffer.as_entire_binding(),
+    }
+}
+
+/// Runs a GPU kernel from a system: on failure, records the error in the context (the
+/// simulation stops with it at the end of the step) and returns false so the caller runs the
+/// CPU reference for this step instead.
+pub fn run_or_record(
+    ctx: &mut GpuContext,
+    f: impl FnOnce(&mut GpuContext) -> Result<(), GpuError>,
+) -> bool {
+    if ctx.failure.is_some() {
+        return false;
+    }
+    match f(ctx) {
+        Ok(()) => true,
+        Err(e) => {
+            tracing::error!("{e}");
+            ctx.invalidate_crust();
+            ctx.failure = Some(e);
+            false
+        }
+    }
+}

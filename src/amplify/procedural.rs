@@ -10,10 +10,12 @@
 //! continuous across triangle edges, so the blend is too). On top comes one isotropic
 //! gradient-noise layer for detail, whose amplitude is blended the same way.
 //!
-//! * Oceanic crust: abyssal hills elongated along the ridge (correlation length 5× longer
-//!   along the ridge than across it), cut by transform faults lying across the ridge (troughs
-//!   every ~150 km along it, with the hills offset from one fault segment to the next), all
-//!   stronger where the crust is young (`0.25 + 0.75·exp(-age/50 My)`).
+//! * Oceanic crust (the paper's choice: Gabor noise oriented by the ridge direction, for the
+//!   transform faults that lie perpendicular to ridges): lineations elongated *across* the
+//!   ridge (correlation length 5× longer across than along it), cut by transform-fault troughs
+//!   that also run across the ridge, every ~60 km along it (jittered), with the lineations
+//!   shifted from one fault segment to the next; all stronger where the crust is young
+//!   (`0.25 + 0.75·exp(-age/50 My)`).
 //! * Continental plains: gentle isotropic relief (±90 m).
 //! * Mountains: ridged noise with its grain along the fold direction (3× longer along than
 //!   across for Andean ranges, 2.5× for Himalayan ones, which are also higher and sharper);
@@ -114,10 +116,10 @@ const OCEAN_HILL_WAVELENGTH_KM: f32 = 5.0;
 const OCEAN_HILL_STRETCH: f32 = 5.0;
 const OCEAN_HILL_AMP_M: f32 = 220.0;
 const OCEAN_YOUNG_AGE_MY: f32 = 50.0;
-const FAULT_SPACING_KM: f32 = 150.0;
+const FAULT_SPACING_KM: f32 = 60.0;
 const FAULT_WIDTH_KM: f32 = 4.0;
-const FAULT_DEPTH_M: f32 = 600.0;
-const FAULT_OFFSET_KM: f32 = 8.0;
+const FAULT_DEPTH_M: f32 = 500.0;
+const FAULT_OFFSET_KM: f32 = 2.0;
 const OCEAN_DETAIL_M: f32 = 20.0;
 const PLAIN_WAVELENGTH_KM: f32 = 30.0;
 const PLAIN_AMP_M: f32 = 90.0;
@@ -326,8 +328,8 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
             * FAULT_OFFSET_KM;
         let hills = fbm2(
             seed,
-            x / (OCEAN_HILL_WAVELENGTH_KM * OCEAN_HILL_STRETCH),
-            (y + shift) / OCEAN_HILL_WAVELENGTH_KM,
+            (x + shift) / OCEAN_HILL_WAVELENGTH_KM,
+            y / (OCEAN_HILL_WAVELENGTH_KM * OCEAN_HILL_STRETCH),
             3,
             0.5,
         );

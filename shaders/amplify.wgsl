@@ -61,6 +61,7 @@ const OROGENY_OLD_AGE_MY: f32 = 150.0;
 const MOUNTAIN_DETAIL_FRACTION: f32 = 0.05;
 const DETAIL_WAVELENGTH_KM: f32 = 0.8;
 const RIDGE_MEAN: f32 = 0.62;
+const BLEND_CUT: f32 = 0.2;
 
 fn hash_u32(v: u32) -> u32 {
     var x = v;
@@ -99,7 +100,7 @@ fn grad2(h: u32, x: f32, y: f32) -> f32 {
 }
 
 fn corner2(seed: u32, ix: i32, iy: i32) -> u32 {
-    return hash_u32((bitcast<u32>(ix) * 0x8da6b343u) ^ hash_u32(bitcast<u32>(iy) ^ seed));
+    return hash_u32((bitcast<u32>(ix) * 0x8da6b343u) ^ (bitcast<u32>(iy) * 0xd8163841u) ^ seed);
 }
 
 fn noise2(seed: u32, x: f32, y: f32) -> f32 {
@@ -120,7 +121,7 @@ fn noise2(seed: u32, x: f32, y: f32) -> f32 {
 
 fn corner3(seed: u32, ix: i32, iy: i32, iz: i32) -> u32 {
     return hash_u32((bitcast<u32>(ix) * 0x8da6b343u) ^ (bitcast<u32>(iy) * 0xd8163841u)
-        ^ hash_u32(bitcast<u32>(iz) ^ seed));
+        ^ (bitcast<u32>(iz) * 0xcb1ab31fu) ^ seed);
 }
 
 fn grad3(h: u32, x: f32, y: f32, z: f32) -> f32 {
@@ -178,22 +179,6 @@ fn fbm2(seed: u32, x: f32, y: f32, octaves: u32, gain: f32) -> f32 {
     return sum / norm;
 }
 
-fn ridged2(seed: u32, x: f32, y: f32, octaves: u32, gain: f32) -> f32 {
-    var sum = 0.0;
-    var norm = 0.0;
-    var amp = 1.0;
-    var freq = 1.0;
-    for (var o = 0u; o < octaves; o = o + 1u) {
-        let n = noise2(seed + o * 0x9e3779b9u, x * freq, y * freq);
-        let r = 1.0 - abs(n) * 1.4;
-        sum = sum + amp * (r * r - RIDGE_MEAN);
-        norm = norm + amp;
-        amp = amp * gain;
-        freq = freq * 2.0;
-    }
-    return sum / norm;
-}
-
 // (relief m, detail amplitude m) of one vertex's primitive at unit direction p.
 fn vertex_relief(v: AmplifyVertex, p: vec3<f32>) -> vec2<f32> {
     let r = params.radius_km;
@@ -212,7 +197,7 @@ fn vertex_relief(v: AmplifyVertex, p: vec3<f32>) -> vec2<f32> {
         var segment = ki;
         for (var j = -1; j <= 1; j = j + 1) {
             let kj = ki + j;
-            let pos = f32(kj) + 0.5 + 0.6 * (hash01(hash_u32(bitcast<u32>(kj) ^ fault_seed)) - 0.5);
+            let pos = f32(kj) + 0.5 + 0.6 * (hash01(bitcast<u32>(kj) ^ fault_seed) - 0.5);
             let dist = s - pos;
             if (abs(dist) < abs(nearest)) {
                 nearest = dist;
@@ -222,7 +207,7 @@ fn vertex_relief(v: AmplifyVertex, p: vec3<f32>) -> vec2<f32> {
         let dist_km = nearest * FAULT_SPACING_KM;
         let trough = exp(-(dist_km / FAULT_WIDTH_KM) * (dist_km / FAULT_WIDTH_KM));
         let trough_mean = FAULT_WIDTH_KM * 1.7724539 / FAULT_SPACING_KM;
-        let shift = (hash01(hash_u32(bitcast<u32>(segment) ^ fault_seed ^ 0x68e31da4u)) - 0.5)
+        let shift = (hash01(bitcast<u32>(segment) ^ fault_seed ^ 0x68e31da4u) - 0.5)
             * 2.0 * FAULT_OFFSET_KM;
         let hills = fbm2(seed, (x + shift) / OCEAN_HILL_WAVELENGTH_KM,
             y / (OCEAN_HILL_WAVELENGTH_KM * OCEAN_HILL_STRETCH), 3u, 0.5);
@@ -249,9 +234,22 @@ fn vertex_relief(v: AmplifyVertex, p: vec3<f32>) -> vec2<f32> {
     let gain = 0.35 + 0.2 * fresh;
     let gx = x / (wl * stretch);
     let gy = y / wl;
-    let ridges = ridged2(mseed, gx, gy, 4u, gain);
-    let rounded = 1.4 * fbm2(mseed, gx, gy, 3u, gain);
-    let relief = amp * (fresh * ridges * 2.5 + (1.0 - fresh) * rounded);
+    // One noise per octave feeds both the ridged (young) and the rounded (old) relief.
+    var ridges = 0.0;
+    var rounded = 0.0;
+    var norm = 0.0;
+    var oamp = 1.0;
+    var freq = 1.0;
+    for (var o = 0u; o < 4u; o = o + 1u) {
+        let n = noise2(mseed + o * 0x9e3779b9u, gx * freq, gy * freq);
+        let r = 1.0 - abs(n) * 1.4;
+        ridges = ridges + oamp * (r * r - RIDGE_MEAN);
+        rounded = rounded + oamp * n;
+        norm = norm + oamp;
+        oamp = oamp * gain;
+        freq = freq * 2.0;
+    }
+    let relief = amp * (fresh * ridges * 2.5 + (1.0 - fresh) * 1.4 * rounded) / norm;
     return vec2<f32>(relief, MOUNTAIN_DETAIL_FRACTION * amp);
 }
 
@@ -261,10 +259,8 @@ fn detail(p: vec3<f32>) -> f32 {
     let x = p.x * f;
     let y = p.y * f;
     let z = p.z * f;
-    let n = noise3(s, x, y, z)
-        + 0.5 * noise3(s + 1u, 2.0 * x, 2.0 * y, 2.0 * z)
-        + 0.25 * noise3(s + 2u, 4.0 * x, 4.0 * y, 4.0 * z);
-    return n / 1.75;
+    let n = noise3(s, x, y, z) + 0.5 * noise3(s + 1u, 2.5 * x, 2.5 * y, 2.5 * z);
+    return n / 1.5;
 }
 
 @compute @workgroup_size(64)
@@ -282,6 +278,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var relief = 0.0;
     var detail_amp = 0.0;
     var w2 = 0.0;
+    var wsum = 0.0;
     for (var k = 0u; k < 3u; k = k + 1u) {
         let c = corners[k];
         let w = weights[k];
@@ -290,13 +287,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         let v = vertices[c];
         base = base + w * v.elevation_m;
-        if (w > 0.0) {
+        let wp = w - BLEND_CUT;
+        if (wp > 0.0) {
             let rd = vertex_relief(v, p);
-            relief = relief + w * rd.x;
-            detail_amp = detail_amp + w * rd.y;
-            w2 = w2 + w * w;
+            relief = relief + wp * rd.x;
+            detail_amp = detail_amp + wp * rd.y;
+            w2 = w2 + wp * wp;
+            wsum = wsum + wp;
         }
     }
+    detail_amp = detail_amp / max(wsum, 1.0e-12);
     let blended = relief / sqrt(max(w2, 1.0e-12));
     let total = (blended + detail_amp * detail(p)) * params.relief_scale;
     out_elevation_m[i] = base + clamp(total, -MAX_RELIEF_M, MAX_RELIEF_M);

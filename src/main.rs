@@ -124,7 +124,7 @@ struct ExtraExports {
     #[arg(long, value_name = "DIR")]
     exemplars: Option<PathBuf>,
     /// Multiplies the amplified relief (1 = the model's amplitudes).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     relief_scale: f32,
     /// Also write a shaded preview PNG of the amplified elevation (and of the crust alone).
     #[arg(long)]

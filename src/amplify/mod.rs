@@ -102,6 +102,35 @@ pub fn build_vertices(mesh: &SphereMesh, crust: &Crust, seed: u64) -> Vec<Amplif
         .collect()
 }
 
+/// Locates `q` in triangle `hint` when it lies strictly inside it (the locator's formula and
+/// early-exit threshold, so the result is bit-identical to `mesh.locate(q)`), else asks the
+/// mesh's locator.
+pub fn hinted_locate(mesh: &SphereMesh, q: DVec3, hint: u32) -> crate::geometry::Location {
+    if let Some(tri) = mesh.triangles.get(hint as usize) {
+        let (a, b, c) = (
+            mesh.positions[tri[0] as usize],
+            mesh.positions[tri[1] as usize],
+            mesh.positions[tri[2] as usize],
+        );
+        let wa = q.dot(b.cross(c));
+        if wa > 0.0 {
+            let wb = q.dot(c.cross(a));
+            let wc = q.dot(a.cross(b));
+            let s = wa + wb + wc;
+            if s > 0.0 {
+                let w = [wa / s, wb / s, wc / s];
+                if w[0].min(w[1]).min(w[2]) > 1e-9 {
+                    return crate::geometry::Location {
+                        triangle: hint,
+                        weights: w,
+                    };
+                }
+            }
+        }
+    }
+    mesh.locate(q)
+}
+
 /// Amplified elevation anywhere on the sphere, from a crust on its mesh.
 pub struct Amplifier<'a> {
     /// The reference mesh.
@@ -166,7 +195,17 @@ impl<'a> Amplifier<'a> {
 
     /// The query (triangle and weights) of unit direction `dir`.
     pub fn query(&self, dir: DVec3) -> AmplifyQuery {
-        let loc = self.mesh.locate(dir);
+        let mut hint = u32::MAX;
+        self.query_hinted(dir, &mut hint)
+    }
+
+    /// [`Self::query`], trying triangle `hint` first (the previous pixel's, usually) and
+    /// leaving the triangle found in it. The answer is the same bits as without a hint: a point
+    /// strictly inside the hint triangle (smallest weight above 1e-9, the locator's own
+    /// early-exit rule, same formula) is strictly inside no other triangle.
+    pub fn query_hinted(&self, dir: DVec3, hint: &mut u32) -> AmplifyQuery {
+        let loc = hinted_locate(self.mesh, dir, *hint);
+        *hint = loc.triangle;
         let t = self.mesh.triangles[loc.triangle as usize];
         let w = loc.weights;
         AmplifyQuery {
@@ -185,6 +224,12 @@ impl<'a> Amplifier<'a> {
     /// Amplified elevation at unit direction `dir`, metres.
     pub fn elevation_m(&self, dir: DVec3) -> f32 {
         let q = self.query(dir);
+        self.elevation_of(&q)
+    }
+
+    /// [`Self::elevation_m`] with a triangle hint (see [`Self::query_hinted`]); same bits.
+    pub fn elevation_m_hinted(&self, dir: DVec3, hint: &mut u32) -> f32 {
+        let q = self.query_hinted(dir, hint);
         self.elevation_of(&q)
     }
 

@@ -5,10 +5,11 @@
 //! the sample's own tangent frame, with its grain along the sample's ridge direction (oceanic
 //! crust) or fold direction (continental crust), shifted by a random offset drawn from the
 //! seed and the sample's position. The relief at a point is the blend of the primitives of the
-//! three corners of the triangle that contains it, weighted by the barycentric weights and
-//! normalised by `sqrt(Σ w²)` so the blend keeps the primitives' variance (the weights are
-//! continuous across triangle edges, so the blend is too). On top comes one isotropic
-//! gradient-noise layer for detail, whose amplitude is blended the same way.
+//! three corners of the triangle that contains it, weighted by `max(w − 0.2, 0)` (w the
+//! barycentric weight) and normalised by `sqrt(Σ w'²)` so the blend keeps the primitives'
+//! variance. The weights are continuous across triangle edges, so the blend is too, and most
+//! points need only one or two primitives. On top comes one isotropic gradient-noise layer
+//! for detail, whose amplitude is blended the same way.
 //!
 //! * Oceanic crust (the paper's choice: Gabor noise oriented by the ridge direction, for the
 //!   transform faults that lie perpendicular to ridges): lineations elongated *across* the
@@ -134,6 +135,9 @@ const MOUNTAIN_FULL_HEIGHT_M: f32 = 3000.0;
 const OROGENY_OLD_AGE_MY: f32 = 150.0;
 const MOUNTAIN_DETAIL_FRACTION: f32 = 0.05;
 const DETAIL_WAVELENGTH_KM: f32 = 0.8;
+/// Taken off each barycentric weight to get the primitive's blending weight (negative: not
+/// evaluated). Below 1/3, so at least one primitive always remains.
+const BLEND_CUT: f32 = 0.2;
 /// Mean of `ridge(n) = (1 - |n|)²` over gradient noise, measured (see the test
 /// `ridged_noise_is_centred`), subtracted so that blended primitives have zero mean.
 const RIDGE_MEAN: f32 = 0.62;
@@ -183,7 +187,7 @@ fn grad2(h: u32, x: f32, y: f32) -> f32 {
 
 #[inline]
 fn corner2(seed: u32, ix: i32, iy: i32) -> u32 {
-    hash_u32((ix as u32).wrapping_mul(0x8da6_b343) ^ hash_u32((iy as u32) ^ seed))
+    hash_u32((ix as u32).wrapping_mul(0x8da6_b343) ^ (iy as u32).wrapping_mul(0xd816_3841) ^ seed)
 }
 
 /// 2D gradient noise, roughly in [-0.75, 0.75], zero at lattice points.
@@ -205,7 +209,8 @@ fn corner3(seed: u32, ix: i32, iy: i32, iz: i32) -> u32 {
     hash_u32(
         (ix as u32).wrapping_mul(0x8da6_b343)
             ^ (iy as u32).wrapping_mul(0xd816_3841)
-            ^ hash_u32((iz as u32) ^ seed),
+            ^ (iz as u32).wrapping_mul(0xcb1a_b31f)
+            ^ seed,
     )
 }
 
@@ -266,25 +271,6 @@ fn fbm2(seed: u32, x: f32, y: f32, octaves: u32, gain: f32) -> f32 {
     sum / norm
 }
 
-/// Fractal sum of ridges `(1 - |n|)² - RIDGE_MEAN`, with octaves weighted by `gain`.
-fn ridged2(seed: u32, x: f32, y: f32, octaves: u32, gain: f32) -> f32 {
-    let mut sum = 0.0;
-    let mut norm = 0.0;
-    let mut amp = 1.0;
-    let mut freq = 1.0;
-    let mut o = 0;
-    while o < octaves {
-        let n = noise2(seed.wrapping_add(o.wrapping_mul(0x9e37_79b9)), x * freq, y * freq);
-        let r = 1.0 - n.abs() * 1.4;
-        sum += amp * (r * r - RIDGE_MEAN);
-        norm += amp;
-        amp *= gain;
-        freq *= 2.0;
-        o += 1;
-    }
-    sum / norm
-}
-
 /// The relief of one vertex's primitive at unit direction `p` (metres), and the amplitude of
 /// the detail layer it asks for (metres).
 fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f32) {
@@ -312,7 +298,7 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
         let mut j = -1;
         while j <= 1 {
             let kj = ki + j;
-            let pos = kj as f32 + 0.5 + 0.6 * (hash01(hash_u32(kj as u32 ^ fault_seed)) - 0.5);
+            let pos = kj as f32 + 0.5 + 0.6 * (hash01(kj as u32 ^ fault_seed) - 0.5);
             let dist = s - pos;
             if dist.abs() < nearest.abs() {
                 nearest = dist;
@@ -323,7 +309,7 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
         let dist_km = nearest * FAULT_SPACING_KM;
         let trough = (-(dist_km / FAULT_WIDTH_KM) * (dist_km / FAULT_WIDTH_KM)).exp();
         let trough_mean = FAULT_WIDTH_KM * 1.772_453_9 / FAULT_SPACING_KM;
-        let shift = (hash01(hash_u32(segment as u32 ^ fault_seed ^ 0x68e3_1da4)) - 0.5)
+        let shift = (hash01(segment as u32 ^ fault_seed ^ 0x68e3_1da4) - 0.5)
             * 2.0
             * FAULT_OFFSET_KM;
         let hills = fbm2(
@@ -361,23 +347,32 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
             seed ^ 0x85eb_ca6b
         };
         let (gx, gy) = (x / (wl * stretch), y / wl);
-        let ridges = ridged2(mseed, gx, gy, 4, gain);
-        let rounded = 1.4 * fbm2(mseed, gx, gy, 3, gain);
-        let relief = amp * (fresh * ridges * 2.5 + (1.0 - fresh) * rounded);
+        // One noise per octave feeds both the ridged (young) and the rounded (old) relief.
+        let (mut ridges, mut rounded, mut norm, mut oamp, mut freq) = (0.0, 0.0, 0.0, 1.0, 1.0);
+        let mut o = 0u32;
+        while o < 4 {
+            let n = noise2(mseed.wrapping_add(o.wrapping_mul(0x9e37_79b9)), gx * freq, gy * freq);
+            let r = 1.0 - n.abs() * 1.4;
+            ridges += oamp * (r * r - RIDGE_MEAN);
+            rounded += oamp * n;
+            norm += oamp;
+            oamp *= gain;
+            freq *= 2.0;
+            o += 1;
+        }
+        let relief = amp * (fresh * ridges * 2.5 + (1.0 - fresh) * 1.4 * rounded) / norm;
         (relief, MOUNTAIN_DETAIL_FRACTION * amp)
     }
 }
 
-/// The isotropic detail layer at unit direction `p`, in [-1, 1] (three octaves of 3D gradient
-/// noise from 0.8 km down to 0.2 km).
+/// The isotropic detail layer at unit direction `p`, in about [-1, 1] (two octaves of 3D
+/// gradient noise, 0.8 km and 0.32 km).
 fn detail(u: &AmplifyUniform, p: [f32; 3]) -> f32 {
     let f = u.radius_km / DETAIL_WAVELENGTH_KM;
     let s = u.seed ^ 0xe654_6b64;
     let (x, y, z) = (p[0] * f, p[1] * f, p[2] * f);
-    let n = noise3(s, x, y, z)
-        + 0.5 * noise3(s.wrapping_add(1), 2.0 * x, 2.0 * y, 2.0 * z)
-        + 0.25 * noise3(s.wrapping_add(2), 4.0 * x, 4.0 * y, 4.0 * z);
-    n / 1.75
+    let n = noise3(s, x, y, z) + 0.5 * noise3(s.wrapping_add(1), 2.5 * x, 2.5 * y, 2.5 * z);
+    n / 1.5
 }
 
 /// The amplified elevation (metres) of one query: the barycentric crust elevation plus the
@@ -396,18 +391,24 @@ pub fn amplify_point_with(
     let mut relief = 0.0f32;
     let mut detail_amp = 0.0f32;
     let mut w2 = 0.0f32;
+    let mut wsum = 0.0f32;
     for (c, w) in corners {
         let Some(v) = vertices.get(c as usize) else {
             continue;
         };
         base += w * v.elevation_m;
-        if w > 0.0 {
+        // Primitive weights: the barycentric weight less BLEND_CUT (still continuous across
+        // edges, and most points need only one or two primitives).
+        let wp = w - BLEND_CUT;
+        if wp > 0.0 {
             let (r, da) = primitive(v, p);
-            relief += w * r;
-            detail_amp += w * da;
-            w2 += w * w;
+            relief += wp * r;
+            detail_amp += wp * da;
+            w2 += wp * wp;
+            wsum += wp;
         }
     }
+    let detail_amp = detail_amp / wsum.max(1.0e-12);
     let blended = relief / w2.max(1.0e-12).sqrt();
     let total = (blended + detail_amp * detail(u, p)) * u.relief_scale;
     base + total.clamp(-MAX_RELIEF_M, MAX_RELIEF_M)

@@ -151,16 +151,41 @@ impl GeoGrid {
         f: &(impl Fn(DVec3) -> T + Sync),
         out: &mut Vec<T>,
     ) {
+        self.band_hinted(row0, rows, &|d, _| f(d), out);
+    }
+
+    /// [`Self::band`] for functions that carry a hint from one pixel to the next along a run
+    /// of 256 pixels (e.g. the previous pixel's triangle); `f` must give the same value
+    /// whatever the hint, so results do not depend on how pixels are split into runs.
+    pub fn band_hinted<T: Send + Default + Clone>(
+        &self,
+        row0: u32,
+        rows: u32,
+        f: &(impl Fn(DVec3, &mut u32) -> T + Sync),
+        out: &mut Vec<T>,
+    ) {
+        const RUN: usize = 256;
         let w = self.width as usize;
         out.clear();
         out.resize(w * rows as usize, T::default());
-        out.par_chunks_mut(64).enumerate().for_each(|(k, chunk)| {
+        out.par_chunks_mut(RUN).enumerate().for_each(|(k, chunk)| {
+            let mut hint = u32::MAX;
             for (i, v) in chunk.iter_mut().enumerate() {
-                let idx = k * 64 + i;
+                let idx = k * RUN + i;
                 let (row, col) = (idx / w, idx % w);
-                *v = f(self.direction(col as u32, row0 + row as u32));
+                *v = f(self.direction(col as u32, row0 + row as u32), &mut hint);
             }
         });
+    }
+
+    /// [`Self::sample`] with a hint (see [`Self::band_hinted`]).
+    pub fn sample_hinted<T: Send + Default + Clone>(
+        &self,
+        f: &(impl Fn(DVec3, &mut u32) -> T + Sync),
+    ) -> Vec<T> {
+        let mut out = Vec::new();
+        self.band_hinted(0, self.height, f, &mut out);
+        out
     }
 
     /// Computes `f` over the whole window (small windows: tests and previews).
@@ -259,10 +284,10 @@ pub fn export_amplified(
     };
     let mut band = Vec::new();
     let mut row0 = 0;
-    let f = |d: DVec3| amp.elevation_m(d);
+    let f = |d: DVec3, hint: &mut u32| amp.elevation_m_hinted(d, hint);
     while row0 < grid.height {
         let rows = BAND_ROWS.min(grid.height - row0);
-        grid.band(row0, rows, &f, &mut band);
+        grid.band_hinted(row0, rows, &f, &mut band);
         for row in band.chunks(grid.width as usize) {
             if let Some(w) = png.as_mut() {
                 w.write_row(row)?;
@@ -297,8 +322,9 @@ pub const CRUST_LAYERS: [(&str, &str); 6] = [
 
 /// The six crust layers at unit direction `q`: scalars interpolated, categories from the
 /// dominant corner.
-pub fn crust_layers_at(mesh: &SphereMesh, crust: &Crust, q: DVec3) -> [f32; 6] {
-    let loc = mesh.locate(q);
+pub fn crust_layers_at(mesh: &SphereMesh, crust: &Crust, q: DVec3, hint: &mut u32) -> [f32; 6] {
+    let loc = crate::amplify::hinted_locate(mesh, q, *hint);
+    *hint = loc.triangle;
     let t = mesh.triangles[loc.triangle as usize];
     let w = loc.weights;
     let lerp = |f: &[f32]| {
@@ -345,11 +371,11 @@ pub fn export_crust_layers(
         .collect::<Result<Vec<_>, _>>()?;
     let mut band = Vec::new();
     let mut row = vec![0.0f32; grid.width as usize];
-    let f = |q: DVec3| crust_layers_at(mesh, crust, q);
+    let f = |q: DVec3, hint: &mut u32| crust_layers_at(mesh, crust, q, hint);
     let mut row0 = 0;
     while row0 < grid.height {
         let rows = BAND_ROWS.min(grid.height - row0);
-        grid.band(row0, rows, &f, &mut band);
+        grid.band_hinted(row0, rows, &f, &mut band);
         for px in band.chunks(grid.width as usize) {
             for (k, w) in writers.iter_mut().enumerate() {
                 for (o, v) in row.iter_mut().zip(px) {

@@ -27,15 +27,19 @@ fn main() -> anyhow::Result<()> {
             .iter()
             .map(|&v| ((f64::from(v) - lo) / (hi - lo) * 65535.0).round() as u16)
             .collect();
-        let img = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(size as u32, size as u32, grey)
-            .ok_or_else(|| anyhow::anyhow!("bad buffer"))?;
+        let img =
+            image::ImageBuffer::<image::Luma<u16>, _>::from_raw(size as u32, size as u32, grey)
+                .ok_or_else(|| anyhow::anyhow!("bad buffer"))?;
         let path = dir.join(format!("{name}_synthetic.png"));
         img.save(&path)?;
         let meta = serde_json::json!({
             "min_elevation_m": lo, "max_elevation_m": hi, "pixel_size_m": px_m,
             "note": "synthetic ridged-noise exemplar made by examples/make_exemplars.rs"
         });
-        std::fs::write(path.with_extension("json"), serde_json::to_string_pretty(&meta)?)?;
+        std::fs::write(
+            path.with_extension("json"),
+            serde_json::to_string_pretty(&meta)?,
+        )?;
         println!("wrote {}", path.display());
     }
     Ok(())

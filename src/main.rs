@@ -457,7 +457,9 @@ fn generate(a: GenerateArgs) -> Result<()> {
     let steps = sim.steps_for(a.my)?;
     run_steps_with_progress(&mut sim, steps, a.quiet, plan.as_ref())?;
     let mut files = write_outputs(&mut sim, &a.out, a.width)?;
-    files.extend(write_extra_exports(&mut sim, &a.out, a.width, &a.extra, a.quiet)?);
+    files.extend(write_extra_exports(
+        &mut sim, &a.out, a.width, &a.extra, a.quiet,
+    )?);
     finish_run(&mut sim, plan.as_ref(), files, a.quiet, started)
 }
 
@@ -512,7 +514,9 @@ fn export(a: ExportArgs) -> Result<()> {
     } else {
         write_outputs(&mut sim, &a.out, a.width)?
     };
-    files.extend(write_extra_exports(&mut sim, &a.out, a.width, &a.extra, a.quiet)?);
+    files.extend(write_extra_exports(
+        &mut sim, &a.out, a.width, &a.extra, a.quiet,
+    )?);
     if !a.quiet {
         report(&sim, started, &files);
     }
@@ -527,7 +531,7 @@ fn write_extra_exports(
     e: &ExtraExports,
     quiet: bool,
 ) -> Result<Vec<PathBuf>> {
-    use tectonic_planets::amplify::{AmplifyOptions, Amplifier, ExemplarSet};
+    use tectonic_planets::amplify::{Amplifier, AmplifyOptions, ExemplarSet};
     use tectonic_planets::io::export::{self, ElevationOutputs, GeoGrid};
     use tectonic_planets::io::gltf;
     let wants_amp = e.amplified || e.preview || e.gltf;
@@ -538,7 +542,10 @@ fn write_extra_exports(
         return Ok(Vec::new());
     }
     if !(e.relief_scale.is_finite() && (0.0..=10.0).contains(&e.relief_scale)) {
-        bail!("--relief-scale must be between 0 and 10, got {}", e.relief_scale);
+        bail!(
+            "--relief-scale must be between 0 and 10, got {}",
+            e.relief_scale
+        );
     }
     let say = |what: &str, t: Instant| {
         if !quiet {
@@ -564,7 +571,9 @@ fn write_extra_exports(
     let mut files = Vec::new();
     if e.geotiff {
         let t = Instant::now();
-        files.extend(export::export_crust_layers(mesh, &view, &grid, out, prefix)?);
+        files.extend(export::export_crust_layers(
+            mesh, &view, &grid, out, prefix,
+        )?);
         say(&format!("crust GeoTIFFs {}x{}", grid.width, grid.height), t);
     }
     if !wants_amp {
@@ -606,9 +615,15 @@ fn write_extra_exports(
         };
         let after = pgrid.sample(&|d| amp.elevation_m(d));
         let before = pgrid.sample(&|d| amp.crust_elevation_m(d));
-        for (name, z) in [("amplified_preview.png", after), ("crust_preview.png", before)] {
+        for (name, z) in [
+            ("amplified_preview.png", after),
+            ("crust_preview.png", before),
+        ] {
             let img = export::shaded_preview(&pgrid, &z, radius_km);
-            files.push(export::save_rgb(&img, &out.join(format!("{prefix}{name}")))?);
+            files.push(export::save_rgb(
+                &img,
+                &out.join(format!("{prefix}{name}")),
+            )?);
         }
         say("previews", t);
     }

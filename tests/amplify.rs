@@ -5,7 +5,7 @@
 use glam::DVec3;
 use tectonic_planets::amplify::exemplar::{Exemplar, synthetic_exemplar};
 use tectonic_planets::amplify::{
-    AmplifyOptions, AmplifyQuery, AmplifyUniform, AmplifyVertex, Amplifier, ExemplarSet,
+    Amplifier, AmplifyOptions, AmplifyQuery, AmplifyUniform, AmplifyVertex, ExemplarSet,
     TerrainType, amplify_cpu, amplify_point,
 };
 use tectonic_planets::geometry::{SphereMesh, from_lat_lon_deg};
@@ -72,7 +72,8 @@ fn lag_correlation(
     let (mut a, mut b) = (Vec::new(), Vec::new());
     for i in 0..n {
         for j in 0..n {
-            let off = east * ((i as f64 - n as f64 / 2.0) * 1.7) + north * ((j as f64 - n as f64 / 2.0) * 1.7);
+            let off = east * ((i as f64 - n as f64 / 2.0) * 1.7)
+                + north * ((j as f64 - n as f64 / 2.0) * 1.7);
             let p = (centre + off / RADIUS_KM).normalize();
             let t = dir(p);
             a.push(relief_at(amp, p, t, 0.0));
@@ -93,7 +94,12 @@ fn std_relief(amp: &Amplifier, centre: DVec3) -> f64 {
     for i in 0..40 {
         for j in 0..40 {
             let off = east * (i as f64 * 2.3) + north * (j as f64 * 2.3);
-            v.push(relief_at(amp, (centre + off / RADIUS_KM).normalize(), east, 0.0));
+            v.push(relief_at(
+                amp,
+                (centre + off / RADIUS_KM).normalize(),
+                east,
+                0.0,
+            ));
         }
     }
     let m = v.iter().sum::<f64>() / v.len() as f64;
@@ -105,10 +111,16 @@ fn same_seed_and_crust_same_bits_at_any_thread_count() {
     let (mesh, crust) = synthetic(20_000, false, 10.0);
     let grid = GeoGrid::region(-5.0, 15.0, 5.0, 45.0, 0.05).unwrap();
     let run = |threads: usize, seed: u64| -> Vec<u32> {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         pool.install(|| {
             let amp = Amplifier::new(&mesh, &crust, seed, AmplifyOptions::default());
-            grid.sample(&|d| amp.elevation_m(d)).iter().map(|v| v.to_bits()).collect()
+            grid.sample(&|d| amp.elevation_m(d))
+                .iter()
+                .map(|v| v.to_bits())
+                .collect()
         })
     };
     let a = run(1, 3);
@@ -116,7 +128,11 @@ fn same_seed_and_crust_same_bits_at_any_thread_count() {
     assert_eq!(a, run(2, 3));
     let other = run(2, 4);
     let differ = a.iter().zip(&other).filter(|(x, y)| x != y).count();
-    assert!(differ > a.len() / 2, "another seed should change the relief ({differ} of {} differ)", a.len());
+    assert!(
+        differ > a.len() / 2,
+        "another seed should change the relief ({differ} of {} differ)",
+        a.len()
+    );
 }
 
 #[test]
@@ -131,21 +147,40 @@ fn adjacent_tiles_agree_along_their_shared_edge() {
     let b_deg = GeoGrid::region(10.0, 30.0, 10.2, 30.2, px).unwrap();
     let f = |d: DVec3| amp.elevation_m(d);
     let overlap = a.i0 + i64::from(a.width) - b_deg.i0;
-    assert!((0..=1).contains(&overlap), "neighbouring regions overlap by {overlap} columns");
+    assert!(
+        (0..=1).contains(&overlap),
+        "neighbouring regions overlap by {overlap} columns"
+    );
     if overlap == 1 {
-        let last = GeoGrid { i0: b_deg.i0, width: 1, ..a };
+        let last = GeoGrid {
+            i0: b_deg.i0,
+            width: 1,
+            ..a
+        };
         let first = GeoGrid { width: 1, ..b_deg };
         assert_eq!(last.sample(&f), first.sample(&f));
     }
     // Tiles on the lattice: east and south neighbours of `a`, and their union.
-    let b = GeoGrid { i0: a.i0 + i64::from(a.width), ..a };
-    let c = GeoGrid { j0: a.j0 + i64::from(a.height), ..a };
-    let ab = GeoGrid { width: 2 * a.width, ..a };
+    let b = GeoGrid {
+        i0: a.i0 + i64::from(a.width),
+        ..a
+    };
+    let c = GeoGrid {
+        j0: a.j0 + i64::from(a.height),
+        ..a
+    };
+    let ab = GeoGrid {
+        width: 2 * a.width,
+        ..a
+    };
     let (za, zb, zc, zab) = (a.sample(&f), b.sample(&f), c.sample(&f), ab.sample(&f));
     let (w, h) = (a.width as usize, a.height as usize);
     // The union tile is exactly the two tiles side by side: same bits.
     for r in 0..h {
-        assert_eq!(&zab[r * ab.width as usize..r * ab.width as usize + w], &za[r * w..r * w + w]);
+        assert_eq!(
+            &zab[r * ab.width as usize..r * ab.width as usize + w],
+            &za[r * w..r * w + w]
+        );
         assert_eq!(
             &zab[r * ab.width as usize + w..(r + 1) * ab.width as usize],
             &zb[r * b.width as usize..(r + 1) * b.width as usize]
@@ -163,11 +198,17 @@ fn adjacent_tiles_agree_along_their_shared_edge() {
         .fold(0.0f32, f32::max);
     for r in 0..h {
         let step = (zb[r * b.width as usize] - za[r * w + w - 1]).abs();
-        assert!(step <= ew_max * 1.5 + 1.0, "seam step {step} m at row {r}, inner max {ew_max}");
+        assert!(
+            step <= ew_max * 1.5 + 1.0,
+            "seam step {step} m at row {r}, inner max {ew_max}"
+        );
     }
     for k in 0..w {
         let step = (zc[k] - za[(h - 1) * w + k]).abs();
-        assert!(step <= ns_max * 1.5 + 1.0, "north-south seam step {step} m at column {k}, inner max {ns_max}");
+        assert!(
+            step <= ns_max * 1.5 + 1.0,
+            "north-south seam step {step} m at column {k}, inner max {ns_max}"
+        );
     }
     let inner_max = ew_max.min(ns_max);
     assert!(inner_max > 1.0, "relief should not be flat");
@@ -188,14 +229,33 @@ fn hundred_metre_tile_averaged_down_matches_the_global_map() {
     };
     let (mut diffs, mut relief) = (Vec::new(), Vec::new());
     // Global pixels over the range, the plains and the ocean.
-    for (lat, lon) in [(5.0, 30.0), (-12.0, 25.0), (20.0, 35.0), (10.0, 50.0), (0.0, 100.0), (-20.0, -100.0)] {
+    for (lat, lon) in [
+        (5.0, 30.0),
+        (-12.0, 25.0),
+        (20.0, 35.0),
+        (10.0, 50.0),
+        (0.0, 100.0),
+        (-20.0, -100.0),
+    ] {
         for s in 0..12 {
             let col = ((lon + 180.0) / global.dx_deg) as i64 + s * 7;
             let row = ((90.0 - lat) / global.dy_deg) as i64 + s * 5;
-            let g = GeoGrid { i0: col, j0: row, width: 1, height: 1, ..global };
+            let g = GeoGrid {
+                i0: col,
+                j0: row,
+                width: 1,
+                height: 1,
+                ..global
+            };
             let d = g.direction(0, 0);
             let z_global = f64::from(amp.elevation_m(d));
-            let tile = GeoGrid { i0: col * k, j0: row * k, width: k as u32, height: k as u32, ..fine };
+            let tile = GeoGrid {
+                i0: col * k,
+                j0: row * k,
+                width: k as u32,
+                height: k as u32,
+                ..fine
+            };
             let z = tile.sample(&|d| amp.elevation_m(d));
             let mean = z.iter().map(|&v| f64::from(v)).sum::<f64>() / z.len() as f64;
             diffs.push(mean - z_global);
@@ -205,12 +265,17 @@ fn hundred_metre_tile_averaged_down_matches_the_global_map() {
     let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
     let mean = diffs.iter().sum::<f64>() / diffs.len() as f64;
     let (rms_diff, rms_relief) = (rms(&diffs), rms(&relief));
-    println!("tile average − global: mean {mean:.1} m, rms {rms_diff:.1} m; relief rms {rms_relief:.1} m");
+    println!(
+        "tile average − global: mean {mean:.1} m, rms {rms_diff:.1} m; relief rms {rms_relief:.1} m"
+    );
     // Stated tolerance: the 2.4 km average keeps the relief coarser than a global pixel, so it
     // differs from the global point sample by the sub-pixel relief only: RMS at most 150 m and
     // under 60% of the relief's own RMS, with no bias beyond 40 m.
     assert!(rms_diff < 150.0, "rms {rms_diff}");
-    assert!(rms_diff < 0.6 * rms_relief, "rms {rms_diff} vs relief {rms_relief}");
+    assert!(
+        rms_diff < 0.6 * rms_relief,
+        "rms {rms_diff} vs relief {rms_relief}"
+    );
     assert!(mean.abs() < 40.0, "bias {mean}");
 }
 
@@ -231,7 +296,10 @@ fn mountain_relief_runs_along_the_fold_direction() {
         let ca = lag_correlation(&amp, centre, along, 6.0, 40);
         let cx = lag_correlation(&amp, centre, across, 6.0, 40);
         println!("fold north={fold_north}: correlation at 6 km along {ca:.2}, across {cx:.2}");
-        assert!(ca > cx + 0.25, "fold north={fold_north}: along {ca:.2}, across {cx:.2}");
+        assert!(
+            ca > cx + 0.25,
+            "fold north={fold_north}: along {ca:.2}, across {cx:.2}"
+        );
     }
 }
 
@@ -247,7 +315,10 @@ fn oceanic_relief_runs_across_ridges_and_is_stronger_on_young_floor() {
     let cx = lag_correlation(&amp, young, east, 4.0, 40);
     println!("ocean: correlation at 4 km along the ridge {ca:.2}, across {cx:.2}");
     assert!(cx > ca + 0.25, "along {ca:.2}, across {cx:.2}");
-    let (s_young, s_old) = (std_relief(&amp, young), std_relief(&amp, from_lat_lon_deg(10.0, -100.0)));
+    let (s_young, s_old) = (
+        std_relief(&amp, young),
+        std_relief(&amp, from_lat_lon_deg(10.0, -100.0)),
+    );
     println!("ocean relief std: young {s_young:.0} m, old {s_old:.0} m");
     assert!(s_young > 1.8 * s_old, "young {s_young}, old {s_old}");
 }
@@ -265,13 +336,16 @@ fn old_ranges_are_lower_and_smoother_than_young_ones() {
         let (e, n) = east_north(centre);
         let mut s = 0.0;
         for i in 0..400 {
-            let p = (centre + (e * (i as f64 * 0.9) + n * (i as f64 * 0.37)) / RADIUS_KM).normalize();
+            let p =
+                (centre + (e * (i as f64 * 0.9) + n * (i as f64 * 0.37)) / RADIUS_KM).normalize();
             s += (relief_at(a, p, n, 0.5) - relief_at(a, p, n, 0.0)).powi(2);
         }
         (s / 400.0).sqrt()
     };
     let (ry, ro) = (rough(&a_young) / sy, rough(&a_old) / so);
-    println!("range relief std: young {sy:.0} m, old {so:.0} m; roughness young {ry:.3}, old {ro:.3}");
+    println!(
+        "range relief std: young {sy:.0} m, old {so:.0} m; roughness young {ry:.3}, old {ro:.3}"
+    );
     assert!(so < 0.7 * sy, "old {so} vs young {sy}");
     assert!(ro < ry, "old roughness {ro} vs young {ry}");
     // And plains are gentle next to both.
@@ -308,7 +382,11 @@ fn shipped_exemplars_load() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/exemplars");
     let set = ExemplarSet::load_dir(&dir).unwrap();
     for ty in TerrainType::ALL {
-        assert!(!set.by_type[ty as usize].is_empty(), "no {} exemplar", ty.folder());
+        assert!(
+            !set.by_type[ty as usize].is_empty(),
+            "no {} exemplar",
+            ty.folder()
+        );
     }
     for e in &set.exemplars {
         assert!(e.range_m.1 > e.range_m.0, "{}: flat", e.path.display());
@@ -324,26 +402,45 @@ fn amplify_cpu_matches_the_point_function_and_keeps_bounds() {
         .flat_map(|r| (0..grid.width).map(move |c| (c, r)))
         .map(|(c, r)| amp.query(grid.direction(c, r)))
         .collect();
-    let u = AmplifyUniform { count: queries.len() as u32, ..amp.uniform };
+    let u = AmplifyUniform {
+        count: queries.len() as u32,
+        ..amp.uniform
+    };
     let mut out = vec![0.0f32; queries.len()];
     amplify_cpu(&u, &amp.vertices, &queries, &mut out);
     let (lo, hi) = amp.range_m();
     for (q, &z) in queries.iter().zip(&out) {
         assert_eq!(z.to_bits(), amplify_point(&u, &amp.vertices, q).to_bits());
-        assert!(z.is_finite() && z >= lo && z <= hi, "{z} outside {lo}..{hi}");
+        assert!(
+            z.is_finite() && z >= lo && z <= hi,
+            "{z} outside {lo}..{hi}"
+        );
     }
     // Relief scale 0 gives the crust back.
-    let flat = Amplifier::new(&mesh, &crust, 3, AmplifyOptions { relief_scale: 0.0, ..Default::default() });
+    let flat = Amplifier::new(
+        &mesh,
+        &crust,
+        3,
+        AmplifyOptions {
+            relief_scale: 0.0,
+            ..Default::default()
+        },
+    );
     let d = from_lat_lon_deg(3.0, 31.0);
     assert_eq!(flat.elevation_m(d), flat.crust_elevation_m(d));
 }
 
 #[test]
 fn amplify_shader_validates_and_matches_the_rust_layout() {
-    let src = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/shaders/amplify.wgsl")).unwrap();
-    let module = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
-    let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
-        .validate(&module);
+    let src = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/shaders/amplify.wgsl"))
+        .unwrap();
+    let module =
+        naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+    let info = naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::empty(),
+    )
+    .validate(&module);
     if let Err(e) = info {
         panic!("amplify.wgsl does not validate: {}", e.emit_to_string(&src));
     }
@@ -357,11 +454,22 @@ fn amplify_shader_validates_and_matches_the_rust_layout() {
             .unwrap_or_else(|| panic!("no struct {name} in the shader"));
         layouter[h].size as usize
     };
-    assert_eq!(size_of("AmplifyVertex"), std::mem::size_of::<AmplifyVertex>());
+    assert_eq!(
+        size_of("AmplifyVertex"),
+        std::mem::size_of::<AmplifyVertex>()
+    );
     assert_eq!(size_of("AmplifyQuery"), std::mem::size_of::<AmplifyQuery>());
-    assert_eq!(size_of("AmplifyUniform"), std::mem::size_of::<AmplifyUniform>());
+    assert_eq!(
+        size_of("AmplifyUniform"),
+        std::mem::size_of::<AmplifyUniform>()
+    );
     // The shader carries the same constants as the CPU reference.
-    for c in ["RIDGE_MEAN: f32 = 0.62", "ANDEAN_AMP_M: f32 = 1300.0", "FAULT_SPACING_KM: f32 = 60.0", "MAX_RELIEF_M: f32 = 4000.0"] {
+    for c in [
+        "RIDGE_MEAN: f32 = 0.62",
+        "ANDEAN_AMP_M: f32 = 1300.0",
+        "FAULT_SPACING_KM: f32 = 60.0",
+        "MAX_RELIEF_M: f32 = 4000.0",
+    ] {
         assert!(src.contains(c), "shader lacks `{c}`");
     }
 }

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use glam::DVec3;
-use tectonic_planets::amplify::{AmplifyOptions, Amplifier};
+use tectonic_planets::amplify::{Amplifier, AmplifyOptions};
 use tectonic_planets::geometry::SphereMesh;
 use tectonic_planets::io::export::{self, ElevationOutputs, GeoGrid};
 use tectonic_planets::io::gltf::{GltfOptions, elevation_colour, planet_glb};
@@ -33,7 +33,11 @@ fn small_planet() -> (SphereMesh, Crust) {
         if land {
             c.crust_type[i] = CrustType::Continental;
             c.elevation_km[i] = 0.5 + p.z.abs() as f32 * 2.0;
-            c.orogeny[i] = if p.z > 0.3 { Orogeny::Himalayan } else { Orogeny::None };
+            c.orogeny[i] = if p.z > 0.3 {
+                Orogeny::Himalayan
+            } else {
+                Orogeny::None
+            };
             c.orogeny_age_my[i] = 20.0;
         } else {
             c.elevation_km[i] = -3.5;
@@ -67,9 +71,17 @@ fn gdalinfo(path: &Path) -> Option<serde_json::Value> {
 
 fn check_gdal(path: &Path, width: u32, height: u32, b: &tectonic_planets::io::geotiff::GeoBounds) {
     let Some(info) = gdalinfo(path) else { return };
-    assert_eq!(info["size"], serde_json::json!([width, height]), "{}", path.display());
+    assert_eq!(
+        info["size"],
+        serde_json::json!([width, height]),
+        "{}",
+        path.display()
+    );
     let wkt = info["coordinateSystem"]["wkt"].as_str().unwrap_or("");
-    assert!(wkt.contains("WGS 84") && wkt.contains("4326"), "not EPSG:4326: {wkt}");
+    assert!(
+        wkt.contains("WGS 84") && wkt.contains("4326"),
+        "not EPSG:4326: {wkt}"
+    );
     let corners = &info["cornerCoordinates"];
     let close = |v: &serde_json::Value, x: f64, y: f64| {
         let (vx, vy) = (v[0].as_f64().unwrap(), v[1].as_f64().unwrap());
@@ -104,12 +116,19 @@ fn gdal_reads_every_geotiff_with_epsg_4326_and_the_bounds() {
     };
     let files = export::export_amplified(&amp, &region, &outs).unwrap();
     let b = region.bounds();
-    assert!((b.west - 40.25).abs() < 1e-9 && (b.north + 10.0).abs() < 1e-9, "{b:?}");
+    assert!(
+        (b.west - 40.25).abs() < 1e-9 && (b.north + 10.0).abs() < 1e-9,
+        "{b:?}"
+    );
     check_gdal(&files[0], region.width, region.height, &b);
     // Values read back are the amplified elevations at the pixel centres.
-    let t = tectonic_planets::io::geotiff::read_single_band(&std::fs::read(&files[0]).unwrap()).unwrap();
+    let t = tectonic_planets::io::geotiff::read_single_band(&std::fs::read(&files[0]).unwrap())
+        .unwrap();
     let (c, r) = (17u32, 101u32);
-    assert_eq!(t.values[(r * region.width + c) as usize], amp.elevation_m(region.direction(c, r)));
+    assert_eq!(
+        t.values[(r * region.width + c) as usize],
+        amp.elevation_m(region.direction(c, r))
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -124,8 +143,12 @@ fn heightmap16_round_trips_within_one_grey_step() {
         geotiff: None,
     };
     let files = export::export_amplified(&amp, &grid, &outs).unwrap();
-    let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&files[1]).unwrap()).unwrap();
-    let (lo, hi) = (meta["min_elevation_m"].as_f64().unwrap(), meta["max_elevation_m"].as_f64().unwrap());
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&files[1]).unwrap()).unwrap();
+    let (lo, hi) = (
+        meta["min_elevation_m"].as_f64().unwrap(),
+        meta["max_elevation_m"].as_f64().unwrap(),
+    );
     assert_eq!(meta["projection"], "equirectangular");
     assert_eq!(meta["bounds"]["west"], -180.0);
     assert_eq!(meta["bounds"]["north"], 90.0);
@@ -139,7 +162,10 @@ fn heightmap16_round_trips_within_one_grey_step() {
             distinct.insert(g);
             let m = lo + f64::from(g) * step;
             let truth = f64::from(amp.elevation_m(grid.direction(c, r)));
-            assert!((m - truth).abs() <= step * 0.51 + 1e-3, "({c},{r}): {m} vs {truth}");
+            assert!(
+                (m - truth).abs() <= step * 0.51 + 1e-3,
+                "({c},{r}): {m} vs {truth}"
+            );
         }
     }
     assert!(distinct.len() > 100, "heightmap nearly flat");
@@ -175,7 +201,10 @@ fn gltf_mesh_parses_back_and_is_consistent() {
     let glb = planet_glb(&opts, &|d| amp.elevation_m(d), &elevation_colour).unwrap();
     let (json, bin) = parse_glb(&glb);
     assert_eq!(json["asset"]["version"], "2.0");
-    assert_eq!(json["buffers"][0]["byteLength"].as_u64().unwrap() as usize, bin.len());
+    assert_eq!(
+        json["buffers"][0]["byteLength"].as_u64().unwrap() as usize,
+        bin.len()
+    );
     let acc = json["accessors"].as_array().unwrap();
     let views = json["bufferViews"].as_array().unwrap();
     let prim = &json["meshes"][0]["primitives"][0];
@@ -183,7 +212,10 @@ fn gltf_mesh_parses_back_and_is_consistent() {
     assert_eq!(prim["attributes"]["COLOR_0"], 2);
     let view = |k: usize| {
         let v = &views[acc[k]["bufferView"].as_u64().unwrap() as usize];
-        let (o, l) = (v["byteOffset"].as_u64().unwrap() as usize, v["byteLength"].as_u64().unwrap() as usize);
+        let (o, l) = (
+            v["byteOffset"].as_u64().unwrap() as usize,
+            v["byteLength"].as_u64().unwrap() as usize,
+        );
         assert!(o % 4 == 0 && o + l <= bin.len());
         &bin[o..o + l]
     };
@@ -214,17 +246,48 @@ fn gltf_mesh_parses_back_and_is_consistent() {
             })
             .collect();
         let normal = (p[1] - p[0]).cross(p[2] - p[0]);
-        assert!(normal.dot(p[0] + p[1] + p[2]) > 0.0, "inward triangle {t:?}");
+        assert!(
+            normal.dot(p[0] + p[1] + p[2]) > 0.0,
+            "inward triangle {t:?}"
+        );
     }
     assert!(used.iter().all(|&u| u));
     // Relief is there: radii differ by the exaggerated elevations.
-    let radii: Vec<f32> = pos.iter().map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()).collect();
-    let (rmin, rmax) = radii.iter().fold((f32::MAX, f32::MIN), |a, &r| (a.0.min(r), a.1.max(r)));
+    let radii: Vec<f32> = pos
+        .iter()
+        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
+        .collect();
+    let (rmin, rmax) = radii
+        .iter()
+        .fold((f32::MAX, f32::MIN), |a, &r| (a.0.min(r), a.1.max(r)));
     assert!(rmin < 0.99 && rmax > 1.005, "radii {rmin}..{rmax}");
-    assert!(col.iter().all(|c| c.iter().all(|v| (0.0..=1.0).contains(v))));
+    assert!(
+        col.iter()
+            .all(|c| c.iter().all(|v| (0.0..=1.0).contains(v)))
+    );
     // Bad options are refused.
-    assert!(planet_glb(&GltfOptions { segments: 3, ..opts }, &|_| 0.0, &elevation_colour).is_err());
-    assert!(planet_glb(&GltfOptions { exaggeration: f64::NAN, ..opts }, &|_| 0.0, &elevation_colour).is_err());
+    assert!(
+        planet_glb(
+            &GltfOptions {
+                segments: 3,
+                ..opts
+            },
+            &|_| 0.0,
+            &elevation_colour
+        )
+        .is_err()
+    );
+    assert!(
+        planet_glb(
+            &GltfOptions {
+                exaggeration: f64::NAN,
+                ..opts
+            },
+            &|_| 0.0,
+            &elevation_colour
+        )
+        .is_err()
+    );
 }
 
 fn planet() -> Command {
@@ -238,13 +301,31 @@ fn export_command_writes_the_requested_files_and_refuses_bad_flags() {
     let status = planet()
         .arg("export")
         .arg(&save)
-        .args(["--no-maps", "--quiet", "--amplified", "--geotiff", "--preview", "--gltf"])
-        .args(["--gltf-segments", "32", "--region", "-5,10,5,20", "--resolution", "5km"])
+        .args([
+            "--no-maps",
+            "--quiet",
+            "--amplified",
+            "--geotiff",
+            "--preview",
+            "--gltf",
+        ])
+        .args([
+            "--gltf-segments",
+            "32",
+            "--region",
+            "-5,10,5,20",
+            "--resolution",
+            "5km",
+        ])
         .arg("--out")
         .arg(&out)
         .output()
         .unwrap();
-    assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+    assert!(
+        status.status.success(),
+        "{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
     for f in [
         "tile_amplified16.png",
         "tile_amplified16.json",
@@ -260,14 +341,27 @@ fn export_command_writes_the_requested_files_and_refuses_bad_flags() {
     }
     assert!(!out.join("elevation.png").exists(), "--no-maps wrote maps");
     let meta: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("tile_amplified16.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(out.join("tile_amplified16.json")).unwrap())
+            .unwrap();
     assert!((meta["bounds"]["west"].as_f64().unwrap() - 10.0).abs() < 0.05);
     assert!((meta["bounds"]["north"].as_f64().unwrap() - 5.0).abs() < 0.05);
     for (args, needle) in [
-        (vec!["--amplified", "--region", "1,2,3"], "LAT0,LON0,LAT1,LON1"),
-        (vec!["--amplified", "--region", "0,0,1,1", "--resolution", "fast"], "--resolution"),
-        (vec!["--amplified", "--exemplars", "/nonexistent/ex"], "/nonexistent/ex"),
-        (vec!["--amplified", "--relief-scale", "-1"], "--relief-scale"),
+        (
+            vec!["--amplified", "--region", "1,2,3"],
+            "LAT0,LON0,LAT1,LON1",
+        ),
+        (
+            vec!["--amplified", "--region", "0,0,1,1", "--resolution", "fast"],
+            "--resolution",
+        ),
+        (
+            vec!["--amplified", "--exemplars", "/nonexistent/ex"],
+            "/nonexistent/ex",
+        ),
+        (
+            vec!["--amplified", "--relief-scale", "-1"],
+            "--relief-scale",
+        ),
         (vec!["--gltf", "--gltf-segments", "2"], "segments"),
     ] {
         let o = planet()

@@ -113,7 +113,9 @@ impl Exemplar {
             reason,
         };
         if width < 4 || height < 4 || elevation_m.len() != width * height {
-            return Err(bad(format!("needs at least 4×4 pixels, got {width}×{height}")));
+            return Err(bad(format!(
+                "needs at least 4×4 pixels, got {width}×{height}"
+            )));
         }
         if !(pixel_km.is_finite() && pixel_km > 0.0) {
             return Err(bad(format!("pixel size {pixel_km} km is not positive")));
@@ -125,7 +127,9 @@ impl Exemplar {
         let mean = elevation_m.iter().map(|&z| z as f64).sum::<f64>() / n;
         let (lo, hi) = elevation_m
             .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |a, &z| (a.0.min(z), a.1.max(z)));
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |a, &z| {
+                (a.0.min(z), a.1.max(z))
+            });
         // Structure tensor of the gradients; ridges run across the dominant gradient.
         let (mut jxx, mut jyy, mut jxy) = (0.0f64, 0.0f64, 0.0f64);
         for r in 1..height - 1 {
@@ -144,7 +148,10 @@ impl Exemplar {
             path,
             width,
             height,
-            relief_m: elevation_m.iter().map(|&z| (z as f64 - mean) as f32).collect(),
+            relief_m: elevation_m
+                .iter()
+                .map(|&z| (z as f64 - mean) as f32)
+                .collect(),
             range_m: (lo, hi),
             fold_angle_rad: fold as f32,
             pixel_km,
@@ -383,7 +390,8 @@ pub fn synthetic_exemplar(
             let mut amp = 1.0;
             let mut f = 1.0 / wavelength_px;
             for o in 0..4u32 {
-                let n = super::procedural::noise2(seed.wrapping_add(o), along * f / 4.0, across * f);
+                let n =
+                    super::procedural::noise2(seed.wrapping_add(o), along * f / 4.0, across * f);
                 let ridge = 1.0 - n.abs() * 1.4;
                 h += amp * ridge * ridge;
                 amp *= 0.5;
@@ -408,7 +416,11 @@ mod tests {
             // Angles are directions (mod 180°).
             let diff = (e.fold_angle_rad - a).rem_euclid(std::f32::consts::PI);
             let diff = diff.min(std::f32::consts::PI - diff).to_degrees();
-            assert!(diff < 12.0, "fold {deg}°: found {}°", e.fold_angle_rad.to_degrees());
+            assert!(
+                diff < 12.0,
+                "fold {deg}°: found {}°",
+                e.fold_angle_rad.to_degrees()
+            );
             assert!(e.range_m.1 > e.range_m.0 + 100.0);
         }
     }

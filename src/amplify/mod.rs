@@ -237,10 +237,12 @@ impl<'a> Amplifier<'a> {
     pub fn elevation_of(&self, q: &AmplifyQuery) -> f32 {
         match &self.exemplars {
             None => amplify_point(&self.uniform, &self.vertices, q),
-            Some(set) => procedural::amplify_point_with(&self.uniform, &self.vertices, q, |v, p| {
-                set.primitive(&self.uniform, v, p)
-                    .unwrap_or_else(|| procedural::procedural_primitive(&self.uniform, v, p))
-            }),
+            Some(set) => {
+                procedural::amplify_point_with(&self.uniform, &self.vertices, q, |v, p| {
+                    set.primitive(&self.uniform, v, p)
+                        .unwrap_or_else(|| procedural::procedural_primitive(&self.uniform, v, p))
+                })
+            }
         }
     }
 

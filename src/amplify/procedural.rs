@@ -262,7 +262,12 @@ fn fbm2(seed: u32, x: f32, y: f32, octaves: u32, gain: f32) -> f32 {
     let mut freq = 1.0;
     let mut o = 0;
     while o < octaves {
-        sum += amp * noise2(seed.wrapping_add(o.wrapping_mul(0x9e37_79b9)), x * freq, y * freq);
+        sum += amp
+            * noise2(
+                seed.wrapping_add(o.wrapping_mul(0x9e37_79b9)),
+                x * freq,
+                y * freq,
+            );
         norm += amp;
         amp *= gain;
         freq *= 2.0;
@@ -309,9 +314,8 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
         let dist_km = nearest * FAULT_SPACING_KM;
         let trough = (-(dist_km / FAULT_WIDTH_KM) * (dist_km / FAULT_WIDTH_KM)).exp();
         let trough_mean = FAULT_WIDTH_KM * 1.772_453_9 / FAULT_SPACING_KM;
-        let shift = (hash01(segment as u32 ^ fault_seed ^ 0x68e3_1da4) - 0.5)
-            * 2.0
-            * FAULT_OFFSET_KM;
+        let shift =
+            (hash01(segment as u32 ^ fault_seed ^ 0x68e3_1da4) - 0.5) * 2.0 * FAULT_OFFSET_KM;
         let hills = fbm2(
             seed,
             (x + shift) / OCEAN_HILL_WAVELENGTH_KM,
@@ -319,7 +323,8 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
             3,
             0.5,
         );
-        let relief = young * (OCEAN_HILL_AMP_M * 1.4 * hills - FAULT_DEPTH_M * (trough - trough_mean));
+        let relief =
+            young * (OCEAN_HILL_AMP_M * 1.4 * hills - FAULT_DEPTH_M * (trough - trough_mean));
         (relief, OCEAN_DETAIL_M)
     } else if v.kind == KIND_PLAIN {
         let n = fbm2(
@@ -351,7 +356,11 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
         let (mut ridges, mut rounded, mut norm, mut oamp, mut freq) = (0.0, 0.0, 0.0, 1.0, 1.0);
         let mut o = 0u32;
         while o < 4 {
-            let n = noise2(mseed.wrapping_add(o.wrapping_mul(0x9e37_79b9)), gx * freq, gy * freq);
+            let n = noise2(
+                mseed.wrapping_add(o.wrapping_mul(0x9e37_79b9)),
+                gx * freq,
+                gy * freq,
+            );
             let r = 1.0 - n.abs() * 1.4;
             ridges += oamp * (r * r - RIDGE_MEAN);
             rounded += oamp * n;
@@ -415,11 +424,7 @@ pub fn amplify_point_with(
 }
 
 /// The procedural primitive of vertex `v` at unit direction `p`: (relief m, detail amplitude m).
-pub fn procedural_primitive(
-    u: &AmplifyUniform,
-    v: &AmplifyVertex,
-    p: [f32; 3],
-) -> (f32, f32) {
+pub fn procedural_primitive(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f32) {
     vertex_relief(u, v, p)
 }
 

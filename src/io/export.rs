@@ -88,8 +88,13 @@ impl GeoGrid {
     ) -> Result<Self, ExportError> {
         let (south, north) = (lat0.min(lat1), lat0.max(lat1));
         let (west, east) = (lon0.min(lon1), lon0.max(lon1));
-        if ![south, north, west, east, pixel_deg].iter().all(|v| v.is_finite()) {
-            return Err(ExportError::Invalid("region and resolution must be finite numbers".into()));
+        if ![south, north, west, east, pixel_deg]
+            .iter()
+            .all(|v| v.is_finite())
+        {
+            return Err(ExportError::Invalid(
+                "region and resolution must be finite numbers".into(),
+            ));
         }
         if south < -90.0 || north > 90.0 || west < -180.0 || east > 180.0 {
             return Err(ExportError::Invalid(format!(
@@ -208,7 +213,11 @@ fn check_side(width: u32, height: u32) -> Result<(), ExportError> {
 /// Parses `LAT0,LON0,LAT1,LON1` (degrees).
 pub fn parse_region(s: &str) -> Result<[f64; 4], ExportError> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
-    let bad = || ExportError::Invalid(format!("--region expects LAT0,LON0,LAT1,LON1 in degrees, got `{s}`"));
+    let bad = || {
+        ExportError::Invalid(format!(
+            "--region expects LAT0,LON0,LAT1,LON1 in degrees, got `{s}`"
+        ))
+    };
     if parts.len() != 4 {
         return Err(bad());
     }
@@ -316,7 +325,10 @@ pub const CRUST_LAYERS: [(&str, &str); 6] = [
     ("crust_age", "crust age (oceanic age on oceanic crust), My"),
     ("plate", "plate id"),
     ("crust_type", "crust type: 0 oceanic, 1 continental"),
-    ("orogeny_type", "orogeny type: 0 none, 1 Andean, 2 Himalayan"),
+    (
+        "orogeny_type",
+        "orogeny type: 0 none, 1 Andean, 2 Himalayan",
+    ),
     ("orogeny_age", "time since the last orogeny, My"),
 ];
 
@@ -407,7 +419,7 @@ pub fn shaded_preview(grid: &GeoGrid, elevation_m: &[f32], radius_km: f64) -> Rg
             let gx = (at(c + 1, r) - at(c.saturating_sub(1), r)) / (2.0 * dx);
             let gy = (at(c, r.saturating_sub(1)) - at(c, r + 1)) / (2.0 * dy);
             let (nx, ny) = (-gx * 2.0, -gy * 2.0);
-            let l = [-0.5f64, 0.5, 0.7071];
+            let l = [-0.5f64, 0.5, std::f64::consts::FRAC_1_SQRT_2];
             let lit = ((nx * l[0] + ny * l[1] + l[2]) / (nx * nx + ny * ny + 1.0).sqrt()).max(0.0);
             let f = (lit / l[2]).clamp(0.3, 1.4);
             let e = at(c, r);

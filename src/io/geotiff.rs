@@ -83,10 +83,15 @@ impl GeoTiffWriter {
             source,
         };
         let data_bytes = u64::from(width) * u64::from(height) * 4;
-        if width == 0 || height == 0 || data_bytes + (1 << 20) + u64::from(height) * 8 > u32::MAX as u64 {
+        if width == 0
+            || height == 0
+            || data_bytes + (1 << 20) + u64::from(height) * 8 > u32::MAX as u64
+        {
             return Err(GeoTiffError::Size {
                 path: path.to_path_buf(),
-                reason: format!("{width}×{height} float32 is empty or too large for a classic TIFF"),
+                reason: format!(
+                    "{width}×{height} float32 is empty or too large for a classic TIFF"
+                ),
             });
         }
         let file = std::fs::File::create(path).map_err(io)?;
@@ -172,7 +177,9 @@ fn build_header(width: u32, height: u32, b: GeoBounds, description: &str) -> Vec
     entries.push((273, TYPE_LONG, height, Vec::new())); // strip offsets, filled below
     entries.push((277, TYPE_SHORT, 1, short(1)));
     entries.push((278, TYPE_LONG, 1, long(1)));
-    let counts: Vec<u8> = (0..height).flat_map(|_| (width * 4).to_le_bytes()).collect();
+    let counts: Vec<u8> = (0..height)
+        .flat_map(|_| (width * 4).to_le_bytes())
+        .collect();
     entries.push((279, TYPE_LONG, height, counts));
     entries.push((284, TYPE_SHORT, 1, short(1)));
     entries.push((339, TYPE_SHORT, 1, short(3)));
@@ -199,7 +206,11 @@ fn build_header(width: u32, height: u32, b: GeoBounds, description: &str) -> Vec
     // Arrays that do not fit in 4 bytes go after the IFD, word aligned.
     let mut extra_len = 0u32;
     for (tag, _, count, payload) in &entries {
-        let len = if *tag == 273 { count * 4 } else { payload.len() as u32 };
+        let len = if *tag == 273 {
+            count * 4
+        } else {
+            payload.len() as u32
+        };
         if len > 4 {
             extra_len += len.div_ceil(4) * 4;
         }
@@ -231,7 +242,7 @@ fn build_header(width: u32, height: u32, b: GeoBounds, description: &str) -> Vec
         } else {
             out.extend_from_slice(&(extra_start + extra.len() as u32).to_le_bytes());
             extra.extend_from_slice(payload);
-            while extra.len() % 4 != 0 {
+            while !extra.len().is_multiple_of(4) {
                 extra.push(0);
             }
         }
@@ -297,13 +308,21 @@ pub fn read_single_band(bytes: &[u8]) -> Result<TiffRaster, String> {
     let u32_at = |o: usize| -> Result<u32, String> {
         let b = bytes.get(o..o + 4).ok_or("truncated TIFF")?;
         let a = [b[0], b[1], b[2], b[3]];
-        Ok(if le { u32::from_le_bytes(a) } else { u32::from_be_bytes(a) })
+        Ok(if le {
+            u32::from_le_bytes(a)
+        } else {
+            u32::from_be_bytes(a)
+        })
     };
     let f64_at = |o: usize| -> Result<f64, String> {
         let b = bytes.get(o..o + 8).ok_or("truncated TIFF")?;
         let mut a = [0u8; 8];
         a.copy_from_slice(b);
-        Ok(if le { f64::from_le_bytes(a) } else { f64::from_be_bytes(a) })
+        Ok(if le {
+            f64::from_le_bytes(a)
+        } else {
+            f64::from_be_bytes(a)
+        })
     };
     if u16_at(2)? != 42 {
         return Err("not a classic TIFF (BigTIFF is not supported)".into());
@@ -332,7 +351,11 @@ pub fn read_single_band(bytes: &[u8]) -> Result<TiffRaster, String> {
             12 => 8,
             _ => 1,
         };
-        let at = if size * count <= 4 { e + 8 } else { u32_at(e + 8)? as usize };
+        let at = if size * count <= 4 {
+            e + 8
+        } else {
+            u32_at(e + 8)? as usize
+        };
         let int = |i: usize| -> Result<u32, String> {
             if ty == 3 {
                 u16_at(at + 2 * i).map(u32::from)
@@ -347,7 +370,7 @@ pub fn read_single_band(bytes: &[u8]) -> Result<TiffRaster, String> {
             259 => compression = int(0)? as u16,
             273 => offsets = (0..count).map(int).collect::<Result<_, _>>()?,
             277 => spp = int(0)? as u16,
-            322 | 323 | 324 => tiled = true,
+            322..=324 => tiled = true,
             339 => sample_format = int(0)? as u16,
             33550 if ty == 12 => pixel_deg = Some(f64_at(at)?),
             33922 if ty == 12 && count >= 6 => {
@@ -383,7 +406,11 @@ pub fn read_single_band(bytes: &[u8]) -> Result<TiffRaster, String> {
     let bytes_per = match (bits, sample_format) {
         (16, 1) | (16, 2) => 2,
         (32, 3) => 4,
-        _ => return Err(format!("{bits}-bit samples of format {sample_format}; expected int16, uint16 or float32")),
+        _ => {
+            return Err(format!(
+                "{bits}-bit samples of format {sample_format}; expected int16, uint16 or float32"
+            ));
+        }
     };
     // Strips are contiguous rows; read them in order.
     let rows_per_strip = height.div_ceil(offsets.len());

@@ -48,7 +48,10 @@ pub fn planet_glb(
             "segments must be between 8 and 8192, got {seg}"
         )));
     }
-    if !(options.exaggeration.is_finite() && options.exaggeration >= 0.0 && options.exaggeration <= 1000.0) {
+    if !(options.exaggeration.is_finite()
+        && options.exaggeration >= 0.0
+        && options.exaggeration <= 1000.0)
+    {
         return Err(GltfError::Invalid(format!(
             "exaggeration must be between 0 and 1000, got {}",
             options.exaggeration
@@ -89,7 +92,12 @@ pub fn planet_glb(
     }
     for r in 0..rings.saturating_sub(1) {
         for c in 0..seg {
-            let (a, b, cc, d) = (ring(r, c), ring(r, c + 1), ring(r + 1, c), ring(r + 1, c + 1));
+            let (a, b, cc, d) = (
+                ring(r, c),
+                ring(r, c + 1),
+                ring(r + 1, c),
+                ring(r + 1, c + 1),
+            );
             idx.extend_from_slice(&[a, cc, d, a, d, b]);
         }
     }
@@ -112,7 +120,11 @@ pub fn planet_glb(
         .iter()
         .zip(&dirs)
         .map(|(n, d)| {
-            let n = if n.length_squared() > 0.0 { n.normalize() } else { *d };
+            let n = if n.length_squared() > 0.0 {
+                n.normalize()
+            } else {
+                *d
+            };
             [n.x as f32, n.y as f32, n.z as f32]
         })
         .collect();
@@ -136,7 +148,7 @@ pub fn planet_glb(
     let mut push = |bytes: &[u8], target: u32| {
         let offset = bin.len();
         bin.extend_from_slice(bytes);
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         views.push(serde_json::json!({
@@ -171,7 +183,7 @@ pub fn planet_glb(
     });
     let mut json_bytes = serde_json::to_vec(&json)
         .map_err(|e| GltfError::Invalid(format!("could not encode the glTF JSON: {e}")))?;
-    while json_bytes.len() % 4 != 0 {
+    while !json_bytes.len().is_multiple_of(4) {
         json_bytes.push(b' ');
     }
     let total = 12 + 8 + json_bytes.len() + 8 + bin.len();

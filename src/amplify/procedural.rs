@@ -159,6 +159,15 @@ fn hash01(x: u32) -> f32 {
     (hash_u32(x) >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
+/// `floor` as (float, int) without a libm call (the baseline x86-64 target has no SSE4.1
+/// `roundss`); exact for |x| < 2³¹, which every noise coordinate here is. WGSL: `floor`.
+#[inline]
+fn floor_i(x: f32) -> (f32, i32) {
+    let t = x as i32;
+    let i = if (t as f32) > x { t - 1 } else { t };
+    (i as f32, i)
+}
+
 #[inline]
 fn fade(t: f32) -> f32 {
     t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
@@ -192,9 +201,8 @@ fn corner2(seed: u32, ix: i32, iy: i32) -> u32 {
 
 /// 2D gradient noise, roughly in [-0.75, 0.75], zero at lattice points.
 pub fn noise2(seed: u32, x: f32, y: f32) -> f32 {
-    let fx = x.floor();
-    let fy = y.floor();
-    let (ix, iy) = (fx as i32, fy as i32);
+    let (fx, ix) = floor_i(x);
+    let (fy, iy) = floor_i(y);
     let (tx, ty) = (x - fx, y - fy);
     let n00 = grad2(corner2(seed, ix, iy), tx, ty);
     let n10 = grad2(corner2(seed, ix + 1, iy), tx - 1.0, ty);
@@ -235,8 +243,9 @@ fn grad3(h: u32, x: f32, y: f32, z: f32) -> f32 {
 
 /// 3D gradient noise, roughly in [-1, 1].
 pub fn noise3(seed: u32, x: f32, y: f32, z: f32) -> f32 {
-    let (fx, fy, fz) = (x.floor(), y.floor(), z.floor());
-    let (ix, iy, iz) = (fx as i32, fy as i32, fz as i32);
+    let (fx, ix) = floor_i(x);
+    let (fy, iy) = floor_i(y);
+    let (fz, iz) = floor_i(z);
     let (tx, ty, tz) = (x - fx, y - fy, z - fz);
     let g = |dx: i32, dy: i32, dz: i32| {
         grad3(
@@ -295,8 +304,7 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
         let young = 0.25 + 0.75 * (-v.age_my.max(0.0) / OCEAN_YOUNG_AGE_MY).exp();
         // Transform faults: lines across the ridge at jittered positions along it.
         let s = x / FAULT_SPACING_KM;
-        let k = s.floor();
-        let ki = k as i32;
+        let (_, ki) = floor_i(s);
         let fault_seed = seed ^ 0x5bd1_e995;
         let mut nearest = 1.0e9f32;
         let mut segment = ki;
@@ -467,6 +475,18 @@ mod tests {
         }
         let mean = sum / (n * n) as f64;
         assert!(mean.abs() < 0.03, "ridged mean off by {mean}");
+    }
+
+    #[test]
+    fn floor_i_is_floor() {
+        for k in -40000..40000 {
+            let x = k as f32 * 0.37 + 0.001 * (k % 7) as f32;
+            for v in [x, -x, x.floor(), -x.floor()] {
+                let (f, i) = floor_i(v);
+                assert_eq!(f, v.floor(), "{v}");
+                assert_eq!(i, v.floor() as i32, "{v}");
+            }
+        }
     }
 
     #[test]

@@ -143,9 +143,21 @@ impl GeoGrid {
 
     /// Unit direction of the centre of pixel (`col`, `row`) of the window.
     pub fn direction(&self, col: u32, row: u32) -> DVec3 {
-        let lon = -180.0 + ((self.i0 + i64::from(col)) as f64 + 0.5) * self.dx_deg;
+        dir_from_trig(self.lat_trig(row), self.lon_trig(col))
+    }
+
+    /// (cos, sin) of the latitude of row `row`'s centres.
+    fn lat_trig(&self, row: u32) -> (f64, f64) {
         let lat = 90.0 - ((self.j0 + i64::from(row)) as f64 + 0.5) * self.dy_deg;
-        crate::geometry::from_lat_lon_deg(lat.clamp(-90.0, 90.0), lon)
+        let r = lat.clamp(-90.0, 90.0).to_radians();
+        (r.cos(), r.sin())
+    }
+
+    /// (cos, sin) of the longitude of column `col`'s centres.
+    fn lon_trig(&self, col: u32) -> (f64, f64) {
+        let lon = -180.0 + ((self.i0 + i64::from(col)) as f64 + 0.5) * self.dx_deg;
+        let r = lon.to_radians();
+        (r.cos(), r.sin())
     }
 
     /// Computes `f` at every pixel of rows `row0..row0+rows`, in parallel, row-major.
@@ -173,12 +185,15 @@ impl GeoGrid {
         let w = self.width as usize;
         out.clear();
         out.resize(w * rows as usize, T::default());
+        // The same trigonometry as `direction`, computed once per column and per row.
+        let lons: Vec<(f64, f64)> = (0..self.width).map(|c| self.lon_trig(c)).collect();
+        let lats: Vec<(f64, f64)> = (0..rows).map(|r| self.lat_trig(row0 + r)).collect();
         out.par_chunks_mut(RUN).enumerate().for_each(|(k, chunk)| {
             let mut hint = u32::MAX;
             for (i, v) in chunk.iter_mut().enumerate() {
                 let idx = k * RUN + i;
                 let (row, col) = (idx / w, idx % w);
-                *v = f(self.direction(col as u32, row0 + row as u32), &mut hint);
+                *v = f(dir_from_trig(lats[row], lons[col]), &mut hint);
             }
         });
     }
@@ -199,6 +214,12 @@ impl GeoGrid {
         self.band(0, self.height, f, &mut out);
         out
     }
+}
+
+/// Unit vector from (cos, sin) of latitude and longitude (as `from_lat_lon_deg`).
+#[inline]
+fn dir_from_trig((clat, slat): (f64, f64), (clon, slon): (f64, f64)) -> DVec3 {
+    DVec3::new(clat * clon, clat * slon, slat)
 }
 
 fn check_side(width: u32, height: u32) -> Result<(), ExportError> {

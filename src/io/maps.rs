@@ -215,7 +215,7 @@ const LAND_STOPS: [(f64, [f64; 3]); 9] = [
 ];
 
 /// Hypsometric tint for an elevation in metres (sea level at 0; 0 and above is land).
-fn hypsometric(elev: f64) -> [f64; 3] {
+pub(crate) fn hypsometric(elev: f64) -> [f64; 3] {
     if elev < 0.0 {
         ramp(&OCEAN_STOPS, elev)
     } else {

@@ -1,5 +1,10 @@
-//! Input and output: parameters (TOML), map rendering (PNG), run summaries (JSON) and saves.
+//! Input and output: parameters (TOML), map rendering (PNG), run summaries (JSON), saves, and
+//! exports (16-bit heightmaps, GeoTIFF, glTF).
 
+pub mod export;
+pub mod geotiff;
+pub mod gltf;
+pub mod heightmap;
 pub mod maps;
 pub mod params;
 pub mod plugin_params;

@@ -1,0 +1,506 @@
+//! Procedural amplification (paper §5, Fig. 11): the detailed elevation at one point from the
+//! three crust samples around it, as a pure per-point function over flat tables.
+//!
+//! Every crust sample (a mesh vertex) carries a relief *primitive*: a noise field laid out in
+//! the sample's own tangent frame, with its grain along the sample's ridge direction (oceanic
+//! crust) or fold direction (continental crust), shifted by a random offset drawn from the
+//! seed and the sample's position. The relief at a point is the blend of the primitives of the
+//! three corners of the triangle that contains it, weighted by `max(w − 0.2, 0)` (w the
+//! barycentric weight) and normalised by `sqrt(Σ w'²)` so the blend keeps the primitives'
+//! variance. The weights are continuous across triangle edges, so the blend is too, and most
+//! points need only one or two primitives. On top comes one isotropic gradient-noise layer
+//! for detail, whose amplitude is blended the same way.
+//!
+//! * Oceanic crust (the paper's choice: Gabor noise oriented by the ridge direction, for the
+//!   transform faults that lie perpendicular to ridges): lineations elongated *across* the
+//!   ridge (correlation length 5× longer across than along it), cut by transform-fault troughs
+//!   that also run across the ridge, every ~60 km along it (jittered), with the lineations
+//!   shifted from one fault segment to the next; all stronger where the crust is young
+//!   (`0.25 + 0.75·exp(-age/50 My)`).
+//! * Continental plains: gentle isotropic relief (±90 m).
+//! * Mountains: ridged noise with its grain along the fold direction (3× longer along than
+//!   across for Andean ranges, 2.5× for Himalayan ones, which are also higher and sharper);
+//!   the amplitude follows the crust's elevation, and old ranges are lower and smoother
+//!   (`exp(-orogeny age/150 My)` fades the ridged part toward rounded noise).
+//!
+//! The value depends only on the seed, the tables and the point: never on the output size,
+//! the tiling or the thread count. Arithmetic is in `f32` so that `shaders/amplify.wgsl` can
+//! mirror it line for line (keep both in sync).
+
+use bytemuck::{Pod, Zeroable};
+
+/// Crust sample kind: oceanic crust.
+pub const KIND_OCEAN: u32 = 0;
+/// Crust sample kind: continental crust outside any orogeny.
+pub const KIND_PLAIN: u32 = 1;
+/// Crust sample kind: continental crust raised by subduction.
+pub const KIND_ANDEAN: u32 = 2;
+/// Crust sample kind: continental crust raised by a collision.
+pub const KIND_HIMALAYAN: u32 = 3;
+
+/// Largest relief (detail included) added to or taken from the crust elevation, metres. The
+/// amplified elevation always lies within the crust's range widened by this much, which lets
+/// 16-bit exports fix their grey scale before the first row is computed.
+pub const MAX_RELIEF_M: f32 = 4000.0;
+
+/// One crust sample as the amplification reads it. Keep in sync with `shaders/amplify.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct AmplifyVertex {
+    /// Unit position, world frame.
+    pub px: f32,
+    /// See `px`.
+    pub py: f32,
+    /// See `px`.
+    pub pz: f32,
+    /// Unit tangent along the grain (ridge or fold direction), world frame.
+    pub ax: f32,
+    /// See `ax`.
+    pub ay: f32,
+    /// See `ax`.
+    pub az: f32,
+    /// Crust elevation, metres.
+    pub elevation_m: f32,
+    /// Oceanic age (oceanic crust) or orogeny age (continental crust), My.
+    pub age_my: f32,
+    /// Random offset of the primitive along the grain, km.
+    pub offset_x_km: f32,
+    /// Random offset of the primitive across the grain, km.
+    pub offset_y_km: f32,
+    /// One of the `KIND_*` constants.
+    pub kind: u32,
+    /// Exemplar index + 1, or 0 for procedural relief (CPU only; the shader ignores it).
+    pub exemplar: u32,
+}
+
+/// One point to amplify: its direction and the triangle around it. Keep in sync with
+/// `shaders/amplify.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct AmplifyQuery {
+    /// Unit direction of the point, world frame.
+    pub dx: f32,
+    /// See `dx`.
+    pub dy: f32,
+    /// See `dx`.
+    pub dz: f32,
+    /// Vertex indices of the containing triangle.
+    pub c0: u32,
+    /// See `c0`.
+    pub c1: u32,
+    /// See `c0`.
+    pub c2: u32,
+    /// Barycentric weights of `c0`, `c1`, `c2` (sum 1).
+    pub w0: f32,
+    /// See `w0`.
+    pub w1: f32,
+    /// See `w0`.
+    pub w2: f32,
+}
+
+/// Global constants of one amplification. Keep in sync with `shaders/amplify.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct AmplifyUniform {
+    /// Planet radius, km.
+    pub radius_km: f32,
+    /// Seed of the noise (32 bits of the planet seed, mixed).
+    pub seed: u32,
+    /// Multiplies all relief (1 = the model's amplitudes).
+    pub relief_scale: f32,
+    /// Number of queries (the shader's bound check).
+    pub count: u32,
+}
+
+// Relief constants (metres, km, My). Keep in sync with shaders/amplify.wgsl.
+const OCEAN_HILL_WAVELENGTH_KM: f32 = 5.0;
+const OCEAN_HILL_STRETCH: f32 = 5.0;
+const OCEAN_HILL_AMP_M: f32 = 220.0;
+const OCEAN_YOUNG_AGE_MY: f32 = 50.0;
+const FAULT_SPACING_KM: f32 = 60.0;
+const FAULT_WIDTH_KM: f32 = 4.0;
+const FAULT_DEPTH_M: f32 = 500.0;
+const FAULT_OFFSET_KM: f32 = 2.0;
+const OCEAN_DETAIL_M: f32 = 20.0;
+const PLAIN_WAVELENGTH_KM: f32 = 30.0;
+const PLAIN_AMP_M: f32 = 90.0;
+const PLAIN_DETAIL_M: f32 = 12.0;
+const ANDEAN_WAVELENGTH_KM: f32 = 14.0;
+const ANDEAN_STRETCH: f32 = 3.0;
+const ANDEAN_AMP_M: f32 = 1300.0;
+const HIMALAYAN_WAVELENGTH_KM: f32 = 18.0;
+const HIMALAYAN_STRETCH: f32 = 2.5;
+const HIMALAYAN_AMP_M: f32 = 1900.0;
+const MOUNTAIN_FULL_HEIGHT_M: f32 = 3000.0;
+const OROGENY_OLD_AGE_MY: f32 = 150.0;
+const MOUNTAIN_DETAIL_FRACTION: f32 = 0.05;
+const DETAIL_WAVELENGTH_KM: f32 = 0.8;
+/// Taken off each barycentric weight to get the primitive's blending weight (negative: not
+/// evaluated). Below 1/3, so at least one primitive always remains.
+const BLEND_CUT: f32 = 0.2;
+/// Mean of `ridge(n) = (1 - |n|)²` over gradient noise, measured (see the test
+/// `ridged_noise_is_centred`), subtracted so that blended primitives have zero mean.
+const RIDGE_MEAN: f32 = 0.62;
+
+/// 32-bit integer hash (lowbias32); WGSL has the same wrapping `u32` arithmetic.
+#[inline]
+pub fn hash_u32(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^= x >> 16;
+    x
+}
+
+/// A hash mapped to [0, 1).
+#[inline]
+fn hash01(x: u32) -> f32 {
+    (hash_u32(x) >> 8) as f32 * (1.0 / 16_777_216.0)
+}
+
+/// `floor` as (float, int) without a libm call (the baseline x86-64 target has no SSE4.1
+/// `roundss`); exact for |x| < 2³¹, which every noise coordinate here is. WGSL: `floor`.
+#[inline]
+fn floor_i(x: f32) -> (f32, i32) {
+    let t = x as i32;
+    let i = if (t as f32) > x { t - 1 } else { t };
+    (i as f32, i)
+}
+
+#[inline]
+fn fade(t: f32) -> f32 {
+    t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
+}
+
+#[inline]
+fn mix(a: f32, b: f32, t: f32) -> f32 {
+    a + (b - a) * t
+}
+
+#[inline]
+fn grad2(h: u32, x: f32, y: f32) -> f32 {
+    // Eight directions: the axes and the diagonals (scaled to unit length).
+    const D: f32 = std::f32::consts::FRAC_1_SQRT_2;
+    match h & 7 {
+        0 => x,
+        1 => -x,
+        2 => y,
+        3 => -y,
+        4 => D * (x + y),
+        5 => D * (x - y),
+        6 => D * (-x + y),
+        _ => D * (-x - y),
+    }
+}
+
+#[inline]
+fn corner2(seed: u32, ix: i32, iy: i32) -> u32 {
+    hash_u32((ix as u32).wrapping_mul(0x8da6_b343) ^ (iy as u32).wrapping_mul(0xd816_3841) ^ seed)
+}
+
+/// 2D gradient noise, roughly in [-0.75, 0.75], zero at lattice points.
+pub fn noise2(seed: u32, x: f32, y: f32) -> f32 {
+    let (fx, ix) = floor_i(x);
+    let (fy, iy) = floor_i(y);
+    let (tx, ty) = (x - fx, y - fy);
+    let n00 = grad2(corner2(seed, ix, iy), tx, ty);
+    let n10 = grad2(corner2(seed, ix + 1, iy), tx - 1.0, ty);
+    let n01 = grad2(corner2(seed, ix, iy + 1), tx, ty - 1.0);
+    let n11 = grad2(corner2(seed, ix + 1, iy + 1), tx - 1.0, ty - 1.0);
+    let (u, v) = (fade(tx), fade(ty));
+    mix(mix(n00, n10, u), mix(n01, n11, u), v)
+}
+
+#[inline]
+fn corner3(seed: u32, ix: i32, iy: i32, iz: i32) -> u32 {
+    hash_u32(
+        (ix as u32).wrapping_mul(0x8da6_b343)
+            ^ (iy as u32).wrapping_mul(0xd816_3841)
+            ^ (iz as u32).wrapping_mul(0xcb1a_b31f)
+            ^ seed,
+    )
+}
+
+#[inline]
+fn grad3(h: u32, x: f32, y: f32, z: f32) -> f32 {
+    // The 12 cube-edge directions of improved Perlin noise (4 repeated to make 16).
+    match h & 15 {
+        0 | 12 => x + y,
+        1 | 13 => -x + y,
+        2 => x - y,
+        3 => -x - y,
+        4 => x + z,
+        5 => -x + z,
+        6 => x - z,
+        7 => -x - z,
+        8 => y + z,
+        9 | 14 => -y + z,
+        10 => y - z,
+        _ => -y - z,
+    }
+}
+
+/// 3D gradient noise, roughly in [-1, 1].
+pub fn noise3(seed: u32, x: f32, y: f32, z: f32) -> f32 {
+    let (fx, ix) = floor_i(x);
+    let (fy, iy) = floor_i(y);
+    let (fz, iz) = floor_i(z);
+    let (tx, ty, tz) = (x - fx, y - fy, z - fz);
+    let g = |dx: i32, dy: i32, dz: i32| {
+        grad3(
+            corner3(seed, ix + dx, iy + dy, iz + dz),
+            tx - dx as f32,
+            ty - dy as f32,
+            tz - dz as f32,
+        )
+    };
+    let (u, v, w) = (fade(tx), fade(ty), fade(tz));
+    let x00 = mix(g(0, 0, 0), g(1, 0, 0), u);
+    let x10 = mix(g(0, 1, 0), g(1, 1, 0), u);
+    let x01 = mix(g(0, 0, 1), g(1, 0, 1), u);
+    let x11 = mix(g(0, 1, 1), g(1, 1, 1), u);
+    mix(mix(x00, x10, v), mix(x01, x11, v), w)
+}
+
+/// Fractal sum of `noise2` (lacunarity 2), normalised by the sum of the octave weights.
+fn fbm2(seed: u32, x: f32, y: f32, octaves: u32, gain: f32) -> f32 {
+    let mut sum = 0.0;
+    let mut norm = 0.0;
+    let mut amp = 1.0;
+    let mut freq = 1.0;
+    let mut o = 0;
+    while o < octaves {
+        sum += amp
+            * noise2(
+                seed.wrapping_add(o.wrapping_mul(0x9e37_79b9)),
+                x * freq,
+                y * freq,
+            );
+        norm += amp;
+        amp *= gain;
+        freq *= 2.0;
+        o += 1;
+    }
+    sum / norm
+}
+
+/// The relief of one vertex's primitive at unit direction `p` (metres), and the amplitude of
+/// the detail layer it asks for (metres).
+fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f32) {
+    let r = u.radius_km;
+    let d = [(p[0] - v.px) * r, (p[1] - v.py) * r, (p[2] - v.pz) * r];
+    let a = [v.ax, v.ay, v.az];
+    // e2 = position × along: the other tangent axis.
+    let b = [
+        v.py * v.az - v.pz * v.ay,
+        v.pz * v.ax - v.px * v.az,
+        v.px * v.ay - v.py * v.ax,
+    ];
+    let x = d[0] * a[0] + d[1] * a[1] + d[2] * a[2] + v.offset_x_km;
+    let y = d[0] * b[0] + d[1] * b[1] + d[2] * b[2] + v.offset_y_km;
+    let seed = u.seed;
+    if v.kind == KIND_OCEAN {
+        let young = 0.25 + 0.75 * (-v.age_my.max(0.0) / OCEAN_YOUNG_AGE_MY).exp();
+        // Transform faults: lines across the ridge at jittered positions along it.
+        let s = x / FAULT_SPACING_KM;
+        let (_, ki) = floor_i(s);
+        let fault_seed = seed ^ 0x5bd1_e995;
+        let mut nearest = 1.0e9f32;
+        let mut segment = ki;
+        let mut j = -1;
+        while j <= 1 {
+            let kj = ki + j;
+            let pos = kj as f32 + 0.5 + 0.6 * (hash01(kj as u32 ^ fault_seed) - 0.5);
+            let dist = s - pos;
+            if dist.abs() < nearest.abs() {
+                nearest = dist;
+                segment = if dist >= 0.0 { kj + 1 } else { kj };
+            }
+            j += 1;
+        }
+        let dist_km = nearest * FAULT_SPACING_KM;
+        let trough = (-(dist_km / FAULT_WIDTH_KM) * (dist_km / FAULT_WIDTH_KM)).exp();
+        let trough_mean = FAULT_WIDTH_KM * 1.772_453_9 / FAULT_SPACING_KM;
+        let shift =
+            (hash01(segment as u32 ^ fault_seed ^ 0x68e3_1da4) - 0.5) * 2.0 * FAULT_OFFSET_KM;
+        let hills = fbm2(
+            seed,
+            (x + shift) / OCEAN_HILL_WAVELENGTH_KM,
+            y / (OCEAN_HILL_WAVELENGTH_KM * OCEAN_HILL_STRETCH),
+            3,
+            0.5,
+        );
+        let relief =
+            young * (OCEAN_HILL_AMP_M * 1.4 * hills - FAULT_DEPTH_M * (trough - trough_mean));
+        (relief, OCEAN_DETAIL_M)
+    } else if v.kind == KIND_PLAIN {
+        let n = fbm2(
+            seed ^ 0x1b87_3593,
+            x / PLAIN_WAVELENGTH_KM,
+            y / PLAIN_WAVELENGTH_KM,
+            4,
+            0.5,
+        );
+        (PLAIN_AMP_M * 1.4 * n, PLAIN_DETAIL_M)
+    } else {
+        let him = v.kind == KIND_HIMALAYAN;
+        let (wl, stretch, amp0) = if him {
+            (HIMALAYAN_WAVELENGTH_KM, HIMALAYAN_STRETCH, HIMALAYAN_AMP_M)
+        } else {
+            (ANDEAN_WAVELENGTH_KM, ANDEAN_STRETCH, ANDEAN_AMP_M)
+        };
+        let height = (v.elevation_m / MOUNTAIN_FULL_HEIGHT_M).clamp(0.1, 1.0);
+        let fresh = (-v.age_my.max(0.0) / OROGENY_OLD_AGE_MY).exp();
+        let amp = amp0 * height * (0.35 + 0.65 * fresh);
+        let gain = 0.35 + 0.2 * fresh;
+        let mseed = if him {
+            seed ^ 0xcc9e_2d51
+        } else {
+            seed ^ 0x85eb_ca6b
+        };
+        let (gx, gy) = (x / (wl * stretch), y / wl);
+        // One noise per octave feeds both the ridged (young) and the rounded (old) relief.
+        let (mut ridges, mut rounded, mut norm, mut oamp, mut freq) = (0.0, 0.0, 0.0, 1.0, 1.0);
+        let mut o = 0u32;
+        while o < 4 {
+            let n = noise2(
+                mseed.wrapping_add(o.wrapping_mul(0x9e37_79b9)),
+                gx * freq,
+                gy * freq,
+            );
+            let r = 1.0 - n.abs() * 1.4;
+            ridges += oamp * (r * r - RIDGE_MEAN);
+            rounded += oamp * n;
+            norm += oamp;
+            oamp *= gain;
+            freq *= 2.0;
+            o += 1;
+        }
+        let relief = amp * (fresh * ridges * 2.5 + (1.0 - fresh) * 1.4 * rounded) / norm;
+        (relief, MOUNTAIN_DETAIL_FRACTION * amp)
+    }
+}
+
+/// The isotropic detail layer at unit direction `p`, in about [-1, 1] (two octaves of 3D
+/// gradient noise, 0.8 km and 0.32 km).
+fn detail(u: &AmplifyUniform, p: [f32; 3]) -> f32 {
+    let f = u.radius_km / DETAIL_WAVELENGTH_KM;
+    let s = u.seed ^ 0xe654_6b64;
+    let (x, y, z) = (p[0] * f, p[1] * f, p[2] * f);
+    let n = noise3(s, x, y, z) + 0.5 * noise3(s.wrapping_add(1), 2.5 * x, 2.5 * y, 2.5 * z);
+    n / 1.5
+}
+
+/// The amplified elevation (metres) of one query: the barycentric crust elevation plus the
+/// blended relief of the three corners' primitives and the detail layer, the relief clamped to
+/// ±[`MAX_RELIEF_M`]. Corners with zero weight are skipped. `primitive` gives the relief of a
+/// corner (see [`procedural_primitive`]; the exemplar amplifier passes its own).
+pub fn amplify_point_with(
+    u: &AmplifyUniform,
+    vertices: &[AmplifyVertex],
+    q: &AmplifyQuery,
+    primitive: impl Fn(&AmplifyVertex, [f32; 3]) -> (f32, f32),
+) -> f32 {
+    let p = [q.dx, q.dy, q.dz];
+    let corners = [(q.c0, q.w0), (q.c1, q.w1), (q.c2, q.w2)];
+    let mut base = 0.0f32;
+    let mut relief = 0.0f32;
+    let mut detail_amp = 0.0f32;
+    let mut w2 = 0.0f32;
+    let mut wsum = 0.0f32;
+    for (c, w) in corners {
+        let Some(v) = vertices.get(c as usize) else {
+            continue;
+        };
+        base += w * v.elevation_m;
+        // Primitive weights: the barycentric weight less BLEND_CUT (still continuous across
+        // edges, and most points need only one or two primitives).
+        let wp = w - BLEND_CUT;
+        if wp > 0.0 {
+            let (r, da) = primitive(v, p);
+            relief += wp * r;
+            detail_amp += wp * da;
+            w2 += wp * wp;
+            wsum += wp;
+        }
+    }
+    let detail_amp = detail_amp / wsum.max(1.0e-12);
+    let blended = relief / w2.max(1.0e-12).sqrt();
+    let total = (blended + detail_amp * detail(u, p)) * u.relief_scale;
+    base + total.clamp(-MAX_RELIEF_M, MAX_RELIEF_M)
+}
+
+/// The procedural primitive of vertex `v` at unit direction `p`: (relief m, detail amplitude m).
+pub fn procedural_primitive(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f32) {
+    vertex_relief(u, v, p)
+}
+
+/// The procedural amplified elevation (metres) of one query.
+pub fn amplify_point(u: &AmplifyUniform, vertices: &[AmplifyVertex], q: &AmplifyQuery) -> f32 {
+    amplify_point_with(u, vertices, q, |v, p| vertex_relief(u, v, p))
+}
+
+/// CPU reference of the `amplify` kernel: the amplified elevation (metres) of every query, in
+/// parallel. `out` must be as long as `queries` (extra entries are left untouched).
+pub fn amplify_cpu(
+    u: &AmplifyUniform,
+    vertices: &[AmplifyVertex],
+    queries: &[AmplifyQuery],
+    out: &mut [f32],
+) {
+    use rayon::prelude::*;
+    out.par_iter_mut()
+        .zip(queries.par_iter())
+        .with_min_len(1024)
+        .for_each(|(o, q)| *o = amplify_point(u, vertices, q));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ridged_noise_is_centred() {
+        // The mean of one ridged octave over many points is close to zero once RIDGE_MEAN is
+        // taken off (otherwise blended primitives would carry a triangle-shaped bias).
+        let mut sum = 0.0f64;
+        let n = 400;
+        for i in 0..n {
+            for j in 0..n {
+                let v = noise2(7, i as f32 * 0.173 + 0.01, j as f32 * 0.219 + 0.02);
+                let r = 1.0 - v.abs() * 1.4;
+                sum += f64::from(r * r - RIDGE_MEAN);
+            }
+        }
+        let mean = sum / (n * n) as f64;
+        assert!(mean.abs() < 0.03, "ridged mean off by {mean}");
+    }
+
+    #[test]
+    fn floor_i_is_floor() {
+        for k in -40000..40000 {
+            let x = k as f32 * 0.37 + 0.001 * (k % 7) as f32;
+            for v in [x, -x, x.floor(), -x.floor()] {
+                let (f, i) = floor_i(v);
+                assert_eq!(f, v.floor(), "{v}");
+                assert_eq!(i, v.floor() as i32, "{v}");
+            }
+        }
+    }
+
+    #[test]
+    fn noise_is_continuous_and_bounded() {
+        let mut max = 0.0f32;
+        for i in 0..2000 {
+            let x = i as f32 * 0.0137 - 5.0;
+            let a = noise2(3, x, 0.3 * x);
+            let b = noise2(3, x + 1e-3, 0.3 * x);
+            assert!((a - b).abs() < 0.01, "jump at {x}");
+            max = max.max(a.abs());
+            let c = noise3(5, x, -0.7 * x, 0.2 * x);
+            assert!(c.abs() <= 1.5);
+        }
+        assert!(max > 0.2 && max < 1.0, "noise2 range {max}");
+    }
+}

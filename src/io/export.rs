@@ -1,0 +1,503 @@
+//! Exports: global and regional grids on one geographic lattice, streamed in bands of rows into
+//! 16-bit PNG heightmaps and float32 GeoTIFFs (amplified elevation and every crust layer), and
+//! shaded previews.
+//!
+//! Every grid is a window of a lattice fixed by its pixel size alone: pixel (I, J) covers
+//! longitudes `-180 + I·dx .. -180 + (I+1)·dx` and latitudes `90 − (J+1)·dy .. 90 − J·dy`, and
+//! is sampled at its centre. Two regions exported at the same resolution therefore share the
+//! same pixel centres, and neighbouring tiles fit together exactly.
+
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+use image::RgbImage;
+use rayon::prelude::*;
+
+use crate::amplify::Amplifier;
+use crate::geometry::SphereMesh;
+use crate::io::geotiff::{GeoBounds, GeoTiffError, GeoTiffWriter};
+use crate::io::heightmap::{Heightmap16Writer, HeightmapError};
+use crate::resources::{Crust, Orogeny};
+
+/// Largest grid side accepted, pixels.
+pub const MAX_SIDE: u32 = 16384;
+/// Rows computed per band when streaming (memory: band × width × 4 bytes per layer).
+pub const BAND_ROWS: u32 = 64;
+
+/// Errors of the exports.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// A region, resolution or size that cannot be exported.
+    #[error("{0}")]
+    Invalid(String),
+    /// Writing a GeoTIFF failed.
+    #[error(transparent)]
+    GeoTiff(#[from] GeoTiffError),
+    /// Writing a heightmap failed.
+    #[error(transparent)]
+    Heightmap(#[from] HeightmapError),
+    /// Writing a preview image failed.
+    #[error("could not write {}: {reason}", path.display())]
+    Image {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        reason: String,
+    },
+}
+
+/// A window of the geographic lattice.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GeoGrid {
+    /// Pixel width, degrees of longitude.
+    pub dx_deg: f64,
+    /// Pixel height, degrees of latitude.
+    pub dy_deg: f64,
+    /// Lattice column of the window's first column.
+    pub i0: i64,
+    /// Lattice row of the window's first row (0 at the north pole).
+    pub j0: i64,
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+}
+
+impl GeoGrid {
+    /// The whole globe, `width × height` pixels.
+    pub fn global(width: u32, height: u32) -> Result<Self, ExportError> {
+        check_side(width, height)?;
+        Ok(Self {
+            dx_deg: 360.0 / f64::from(width),
+            dy_deg: 180.0 / f64::from(height),
+            i0: 0,
+            j0: 0,
+            width,
+            height,
+        })
+    }
+
+    /// The smallest window covering latitudes `lat0..lat1` and longitudes `lon0..lon1`
+    /// (degrees, any order) on the lattice of square pixels of `pixel_deg` degrees.
+    pub fn region(
+        lat0: f64,
+        lon0: f64,
+        lat1: f64,
+        lon1: f64,
+        pixel_deg: f64,
+    ) -> Result<Self, ExportError> {
+        let (south, north) = (lat0.min(lat1), lat0.max(lat1));
+        let (west, east) = (lon0.min(lon1), lon0.max(lon1));
+        if ![south, north, west, east, pixel_deg]
+            .iter()
+            .all(|v| v.is_finite())
+        {
+            return Err(ExportError::Invalid(
+                "region and resolution must be finite numbers".into(),
+            ));
+        }
+        if south < -90.0 || north > 90.0 || west < -180.0 || east > 180.0 {
+            return Err(ExportError::Invalid(format!(
+                "region {lat0},{lon0},{lat1},{lon1} is outside latitudes -90..90 and longitudes -180..180"
+            )));
+        }
+        if north <= south || east <= west {
+            return Err(ExportError::Invalid(format!(
+                "region {lat0},{lon0},{lat1},{lon1} is empty"
+            )));
+        }
+        if !(pixel_deg > 1e-7 && pixel_deg <= 10.0) {
+            return Err(ExportError::Invalid(format!(
+                "pixel size {pixel_deg}° is out of range (1e-7° to 10°)"
+            )));
+        }
+        let i0 = ((west + 180.0) / pixel_deg + 1e-9).floor() as i64;
+        let i1 = ((east + 180.0) / pixel_deg - 1e-9).ceil() as i64;
+        let j0 = ((90.0 - north) / pixel_deg + 1e-9).floor() as i64;
+        let j1 = ((90.0 - south) / pixel_deg - 1e-9).ceil() as i64;
+        let (w, h) = ((i1 - i0).max(1), (j1 - j0).max(1));
+        if w > i64::from(MAX_SIDE) || h > i64::from(MAX_SIDE) {
+            return Err(ExportError::Invalid(format!(
+                "region needs {w}×{h} pixels at {pixel_deg}°; at most {MAX_SIDE} a side (split it into tiles)"
+            )));
+        }
+        Ok(Self {
+            dx_deg: pixel_deg,
+            dy_deg: pixel_deg,
+            i0,
+            j0,
+            width: w as u32,
+            height: h as u32,
+        })
+    }
+
+    /// Outer edges of the window, degrees.
+    pub fn bounds(&self) -> GeoBounds {
+        GeoBounds {
+            west: -180.0 + self.i0 as f64 * self.dx_deg,
+            east: -180.0 + (self.i0 + i64::from(self.width)) as f64 * self.dx_deg,
+            north: 90.0 - self.j0 as f64 * self.dy_deg,
+            south: 90.0 - (self.j0 + i64::from(self.height)) as f64 * self.dy_deg,
+        }
+    }
+
+    /// Unit direction of the centre of pixel (`col`, `row`) of the window.
+    pub fn direction(&self, col: u32, row: u32) -> DVec3 {
+        dir_from_trig(self.lat_trig(row), self.lon_trig(col))
+    }
+
+    /// (cos, sin) of the latitude of row `row`'s centres.
+    fn lat_trig(&self, row: u32) -> (f64, f64) {
+        let lat = 90.0 - ((self.j0 + i64::from(row)) as f64 + 0.5) * self.dy_deg;
+        let r = lat.clamp(-90.0, 90.0).to_radians();
+        (r.cos(), r.sin())
+    }
+
+    /// (cos, sin) of the longitude of column `col`'s centres.
+    fn lon_trig(&self, col: u32) -> (f64, f64) {
+        let lon = -180.0 + ((self.i0 + i64::from(col)) as f64 + 0.5) * self.dx_deg;
+        let r = lon.to_radians();
+        (r.cos(), r.sin())
+    }
+
+    /// Computes `f` at every pixel of rows `row0..row0+rows`, in parallel, row-major.
+    pub fn band<T: Send + Default + Clone>(
+        &self,
+        row0: u32,
+        rows: u32,
+        f: &(impl Fn(DVec3) -> T + Sync),
+        out: &mut Vec<T>,
+    ) {
+        self.band_hinted(row0, rows, &|d, _| f(d), out);
+    }
+
+    /// [`Self::band`] for functions that carry a hint from one pixel to the next along a run
+    /// of 256 pixels (e.g. the previous pixel's triangle); `f` must give the same value
+    /// whatever the hint, so results do not depend on how pixels are split into runs.
+    pub fn band_hinted<T: Send + Default + Clone>(
+        &self,
+        row0: u32,
+        rows: u32,
+        f: &(impl Fn(DVec3, &mut u32) -> T + Sync),
+        out: &mut Vec<T>,
+    ) {
+        const RUN: usize = 256;
+        let w = self.width as usize;
+        out.clear();
+        out.resize(w * rows as usize, T::default());
+        // The same trigonometry as `direction`, computed once per column and per row.
+        let lons: Vec<(f64, f64)> = (0..self.width).map(|c| self.lon_trig(c)).collect();
+        let lats: Vec<(f64, f64)> = (0..rows).map(|r| self.lat_trig(row0 + r)).collect();
+        out.par_chunks_mut(RUN).enumerate().for_each(|(k, chunk)| {
+            let mut hint = u32::MAX;
+            for (i, v) in chunk.iter_mut().enumerate() {
+                let idx = k * RUN + i;
+                let (row, col) = (idx / w, idx % w);
+                *v = f(dir_from_trig(lats[row], lons[col]), &mut hint);
+            }
+        });
+    }
+
+    /// [`Self::sample`] with a hint (see [`Self::band_hinted`]).
+    pub fn sample_hinted<T: Send + Default + Clone>(
+        &self,
+        f: &(impl Fn(DVec3, &mut u32) -> T + Sync),
+    ) -> Vec<T> {
+        let mut out = Vec::new();
+        self.band_hinted(0, self.height, f, &mut out);
+        out
+    }
+
+    /// Computes `f` over the whole window (small windows: tests and previews).
+    pub fn sample<T: Send + Default + Clone>(&self, f: &(impl Fn(DVec3) -> T + Sync)) -> Vec<T> {
+        let mut out = Vec::new();
+        self.band(0, self.height, f, &mut out);
+        out
+    }
+}
+
+/// Unit vector from (cos, sin) of latitude and longitude (as `from_lat_lon_deg`).
+#[inline]
+fn dir_from_trig((clat, slat): (f64, f64), (clon, slon): (f64, f64)) -> DVec3 {
+    DVec3::new(clat * clon, clat * slon, slat)
+}
+
+fn check_side(width: u32, height: u32) -> Result<(), ExportError> {
+    if width == 0 || height == 0 || width > MAX_SIDE || height > MAX_SIDE {
+        return Err(ExportError::Invalid(format!(
+            "grid {width}×{height} must be between 1 and {MAX_SIDE} pixels a side"
+        )));
+    }
+    Ok(())
+}
+
+/// Parses `LAT0,LON0,LAT1,LON1` (degrees).
+pub fn parse_region(s: &str) -> Result<[f64; 4], ExportError> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let bad = || {
+        ExportError::Invalid(format!(
+            "--region expects LAT0,LON0,LAT1,LON1 in degrees, got `{s}`"
+        ))
+    };
+    if parts.len() != 4 {
+        return Err(bad());
+    }
+    let mut v = [0.0; 4];
+    for (o, p) in v.iter_mut().zip(parts) {
+        *o = p.parse::<f64>().map_err(|_| bad())?;
+    }
+    Ok(v)
+}
+
+/// Parses a resolution (`100m`, `2.5km`, `0.001deg`, or a bare number of metres) into degrees
+/// per pixel on a planet of `radius_km` (metres are measured north–south).
+pub fn parse_resolution(s: &str, radius_km: f64) -> Result<f64, ExportError> {
+    let t = s.trim().to_ascii_lowercase();
+    let bad = || {
+        ExportError::Invalid(format!(
+            "--resolution expects e.g. 100m, 2km or 0.001deg, got `{s}`"
+        ))
+    };
+    let (num, unit_deg) = if let Some(n) = t.strip_suffix("deg") {
+        (n, 1.0)
+    } else if let Some(n) = t.strip_suffix("km") {
+        (n, 1.0 / (radius_km * std::f64::consts::PI / 180.0))
+    } else {
+        let n = t.strip_suffix('m').unwrap_or(&t);
+        (n, 1.0 / (radius_km * 1000.0 * std::f64::consts::PI / 180.0))
+    };
+    let v: f64 = num.trim().parse().map_err(|_| bad())?;
+    if !(v.is_finite() && v > 0.0) {
+        return Err(bad());
+    }
+    Ok(v * unit_deg)
+}
+
+/// What to write for the amplified elevation of a grid.
+#[derive(Clone, Debug, Default)]
+pub struct ElevationOutputs {
+    /// 16-bit PNG heightmap (+ JSON sidecar).
+    pub png16: Option<PathBuf>,
+    /// Float32 GeoTIFF.
+    pub geotiff: Option<PathBuf>,
+}
+
+/// Streams the amplified elevation of `grid` into the requested files, `BAND_ROWS` rows at a
+/// time (memory stays at one band whatever the size). The PNG's grey scale is the amplifier's
+/// whole-planet range, so tiles of one planet share it. Returns the files written.
+pub fn export_amplified(
+    amp: &Amplifier,
+    grid: &GeoGrid,
+    outputs: &ElevationOutputs,
+) -> Result<Vec<PathBuf>, ExportError> {
+    let bounds = grid.bounds();
+    let (lo, hi) = amp.range_m();
+    let mut png = match &outputs.png16 {
+        Some(p) => Some(Heightmap16Writer::create(
+            p,
+            grid.width,
+            grid.height,
+            bounds,
+            (f64::from(lo), f64::from(hi)),
+        )?),
+        None => None,
+    };
+    let mut tiff = match &outputs.geotiff {
+        Some(p) => Some(GeoTiffWriter::create(
+            p,
+            grid.width,
+            grid.height,
+            bounds,
+            "amplified elevation, metres",
+        )?),
+        None => None,
+    };
+    let mut band = Vec::new();
+    let mut row0 = 0;
+    let f = |d: DVec3, hint: &mut u32| amp.elevation_m_hinted(d, hint);
+    while row0 < grid.height {
+        let rows = BAND_ROWS.min(grid.height - row0);
+        grid.band_hinted(row0, rows, &f, &mut band);
+        for row in band.chunks(grid.width as usize) {
+            if let Some(w) = png.as_mut() {
+                w.write_row(row)?;
+            }
+            if let Some(w) = tiff.as_mut() {
+                w.write_row(row)?;
+            }
+        }
+        row0 += rows;
+    }
+    let mut files = Vec::new();
+    if let Some(w) = png {
+        let (a, b) = w.finish()?;
+        files.push(a);
+        files.push(b);
+    }
+    if let Some(w) = tiff {
+        files.push(w.finish()?);
+    }
+    Ok(files)
+}
+
+/// The crust layers exported as GeoTIFFs, with their file stems and descriptions.
+pub const CRUST_LAYERS: [(&str, &str); 6] = [
+    ("crust_elevation", "crust elevation, metres"),
+    ("crust_age", "crust age (oceanic age on oceanic crust), My"),
+    ("plate", "plate id"),
+    ("crust_type", "crust type: 0 oceanic, 1 continental"),
+    (
+        "orogeny_type",
+        "orogeny type: 0 none, 1 Andean, 2 Himalayan",
+    ),
+    ("orogeny_age", "time since the last orogeny, My"),
+];
+
+/// The six crust layers at unit direction `q`: scalars interpolated, categories from the
+/// dominant corner.
+pub fn crust_layers_at(mesh: &SphereMesh, crust: &Crust, q: DVec3, hint: &mut u32) -> [f32; 6] {
+    let loc = crate::amplify::hinted_locate(mesh, q, *hint);
+    *hint = loc.triangle;
+    let t = mesh.triangles[loc.triangle as usize];
+    let w = loc.weights;
+    let lerp = |f: &[f32]| {
+        (w[0] * f64::from(f[t[0] as usize])
+            + w[1] * f64::from(f[t[1] as usize])
+            + w[2] * f64::from(f[t[2] as usize])) as f32
+    };
+    let d = t[loc.dominant_corner()] as usize;
+    let orogeny = match crust.orogeny[d] {
+        Orogeny::None => 0.0,
+        Orogeny::Andean => 1.0,
+        Orogeny::Himalayan => 2.0,
+    };
+    [
+        lerp(&crust.elevation_km) * 1000.0,
+        lerp(&crust.age_my),
+        crust.plate[d] as f32,
+        crust.crust_type[d] as u8 as f32,
+        orogeny,
+        lerp(&crust.orogeny_age_my),
+    ]
+}
+
+/// Streams the six crust layers of `grid` into `dir/<prefix><layer>.tif`. Returns the files.
+pub fn export_crust_layers(
+    mesh: &SphereMesh,
+    crust: &Crust,
+    grid: &GeoGrid,
+    dir: &Path,
+    prefix: &str,
+) -> Result<Vec<PathBuf>, ExportError> {
+    let bounds = grid.bounds();
+    let mut writers = CRUST_LAYERS
+        .iter()
+        .map(|(stem, desc)| {
+            GeoTiffWriter::create(
+                &dir.join(format!("{prefix}{stem}.tif")),
+                grid.width,
+                grid.height,
+                bounds,
+                desc,
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut band = Vec::new();
+    let mut row = vec![0.0f32; grid.width as usize];
+    let f = |q: DVec3, hint: &mut u32| crust_layers_at(mesh, crust, q, hint);
+    let mut row0 = 0;
+    while row0 < grid.height {
+        let rows = BAND_ROWS.min(grid.height - row0);
+        grid.band_hinted(row0, rows, &f, &mut band);
+        for px in band.chunks(grid.width as usize) {
+            for (k, w) in writers.iter_mut().enumerate() {
+                for (o, v) in row.iter_mut().zip(px) {
+                    *o = v[k];
+                }
+                w.write_row(&row)?;
+            }
+        }
+        row0 += rows;
+    }
+    writers
+        .into_iter()
+        .map(|w| w.finish().map_err(ExportError::from))
+        .collect()
+}
+
+/// A shaded-relief preview of elevations (metres, row-major over `grid`): hypsometric colours
+/// lit from the north-west, slopes from the true pixel size on a planet of `radius_km`.
+pub fn shaded_preview(grid: &GeoGrid, elevation_m: &[f32], radius_km: f64) -> RgbImage {
+    let (w, h) = (grid.width as usize, grid.height as usize);
+    let m_per_deg = radius_km * 1000.0 * std::f64::consts::PI / 180.0;
+    let dy = grid.dy_deg * m_per_deg;
+    let at = |c: usize, r: usize| f64::from(elevation_m[r.min(h - 1) * w + c.min(w - 1)]);
+    let mut img = RgbImage::new(grid.width, grid.height);
+    for r in 0..h {
+        let lat = (90.0 - (grid.j0 as f64 + r as f64 + 0.5) * grid.dy_deg).to_radians();
+        let dx = (grid.dx_deg * m_per_deg * lat.cos()).max(1e-3);
+        for c in 0..w {
+            let gx = (at(c + 1, r) - at(c.saturating_sub(1), r)) / (2.0 * dx);
+            let gy = (at(c, r.saturating_sub(1)) - at(c, r + 1)) / (2.0 * dy);
+            let (nx, ny) = (-gx * 2.0, -gy * 2.0);
+            let l = [-0.5f64, 0.5, std::f64::consts::FRAC_1_SQRT_2];
+            let lit = ((nx * l[0] + ny * l[1] + l[2]) / (nx * nx + ny * ny + 1.0).sqrt()).max(0.0);
+            let f = (lit / l[2]).clamp(0.3, 1.4);
+            let e = at(c, r);
+            let f = if e < 0.0 { 1.0 + 0.4 * (f - 1.0) } else { f };
+            let col = crate::io::maps::hypsometric(e);
+            let px = [col[0] * f / 255.0, col[1] * f / 255.0, col[2] * f / 255.0];
+            img.put_pixel(
+                c as u32,
+                r as u32,
+                image::Rgb(px.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)),
+            );
+        }
+    }
+    img
+}
+
+/// Saves an RGB image as PNG, naming the path on failure.
+pub fn save_rgb(img: &RgbImage, path: &Path) -> Result<PathBuf, ExportError> {
+    img.save(path).map_err(|e| ExportError::Image {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    Ok(path.to_path_buf())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn regions_snap_to_one_lattice() {
+        let px = 0.01;
+        let a = GeoGrid::region(10.0, 20.0, 11.0, 21.0, px).unwrap();
+        let b = GeoGrid::region(10.0, 21.0, 11.0, 22.0, px).unwrap();
+        assert_eq!(a.width, 100);
+        assert_eq!(a.height, 100);
+        assert_eq!(a.i0 + i64::from(a.width), b.i0);
+        let (ba, bb) = (a.bounds(), b.bounds());
+        assert!((ba.east - bb.west).abs() < 1e-9);
+        assert!((ba.west - 20.0).abs() < 1e-9 && (ba.north - 11.0).abs() < 1e-9);
+        // Same lattice pixel, same direction bits.
+        assert_eq!(a.direction(a.width, 5), b.direction(0, 5));
+    }
+
+    #[test]
+    fn bad_regions_and_resolutions_are_named() {
+        assert!(GeoGrid::region(0.0, 0.0, 0.0, 1.0, 0.1).is_err());
+        assert!(GeoGrid::region(-95.0, 0.0, 0.0, 1.0, 0.1).is_err());
+        let e = GeoGrid::region(0.0, 0.0, 80.0, 170.0, 0.0001).unwrap_err();
+        assert!(e.to_string().contains("16384"), "{e}");
+        assert!(parse_region("1,2,3").is_err());
+        assert!(parse_resolution("fast", 6371.0).is_err());
+        assert!(parse_resolution("-3m", 6371.0).is_err());
+        let d = parse_resolution("100m", 6371.0).unwrap();
+        assert!((d * 6371.0 * 1000.0 * std::f64::consts::PI / 180.0 - 100.0).abs() < 1e-6);
+        let k = parse_resolution("2km", 6371.0).unwrap();
+        assert!((k / d - 20.0).abs() < 1e-9);
+        assert_eq!(parse_resolution("0.5deg", 6371.0).unwrap(), 0.5);
+    }
+}

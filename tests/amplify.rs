@@ -1,0 +1,475 @@
+//! Amplification (paper §5): determinism, seamless tiles, agreement with the global map,
+//! anisotropy along fold and ridge directions, age effects, exemplars, and the WGSL kernel's
+//! validity and layout.
+
+use glam::DVec3;
+use tectonic_planets::amplify::exemplar::{Exemplar, synthetic_exemplar};
+use tectonic_planets::amplify::{
+    Amplifier, AmplifyOptions, AmplifyQuery, AmplifyUniform, AmplifyVertex, ExemplarSet,
+    TerrainType, amplify_cpu, amplify_point,
+};
+use tectonic_planets::geometry::{SphereMesh, from_lat_lon_deg};
+use tectonic_planets::io::export::GeoGrid;
+use tectonic_planets::prelude::*;
+
+const RADIUS_KM: f64 = 6371.0;
+
+/// East and north unit tangents at `p`.
+fn east_north(p: DVec3) -> (DVec3, DVec3) {
+    let east = DVec3::Z.cross(p).normalize();
+    (east, p.cross(east))
+}
+
+/// A hand-made crust: an Andean range (lon 20..40, |lat| < 30) with the fold direction given by
+/// `fold` (east or north), plains around it (lon 0..60), ocean elsewhere with ridges running
+/// north–south (ridge direction north), young near lon 90 and old near lon -90.
+fn synthetic(samples: usize, fold_north: bool, orogeny_age_my: f32) -> (SphereMesh, Crust) {
+    let mesh = SphereMesh::fibonacci(samples, 0.5, 7, RADIUS_KM).unwrap();
+    let mut c = Crust::with_len(mesh.len());
+    for (i, &p) in mesh.positions.iter().enumerate() {
+        let lat = p.z.asin().to_degrees();
+        let lon = p.y.atan2(p.x).to_degrees();
+        let (east, north) = east_north(p);
+        c.plate[i] = 0;
+        if (0.0..60.0).contains(&lon) && lat.abs() < 30.0 {
+            c.crust_type[i] = CrustType::Continental;
+            c.thickness_km[i] = 35.0;
+            if (20.0..40.0).contains(&lon) {
+                c.elevation_km[i] = 3.0;
+                c.orogeny[i] = Orogeny::Andean;
+                c.orogeny_age_my[i] = orogeny_age_my;
+                let f = if fold_north { north } else { east };
+                c.fold_dir[i] = [f.x as f32, f.y as f32, f.z as f32];
+            } else {
+                c.elevation_km[i] = 0.3;
+            }
+        } else {
+            c.elevation_km[i] = -4.0;
+            c.thickness_km[i] = 7.0;
+            c.age_my[i] = if lon > 0.0 { 5.0 } else { 150.0 };
+            c.ridge_dir[i] = [north.x as f32, north.y as f32, north.z as f32];
+        }
+    }
+    (mesh, c)
+}
+
+/// Relief (amplified minus crust) at the point `d_km` along tangent `t` from `p`.
+fn relief_at(amp: &Amplifier, p: DVec3, t: DVec3, d_km: f64) -> f64 {
+    let q = (p + t * (d_km / RADIUS_KM)).normalize();
+    f64::from(amp.elevation_m(q)) - f64::from(amp.crust_elevation_m(q))
+}
+
+/// Pearson correlation of relief at pairs of points `lag_km` apart along `dir(p)`, over a
+/// patch of `n × n` points spaced 1.7 km around `centre`.
+fn lag_correlation(
+    amp: &Amplifier,
+    centre: DVec3,
+    dir: impl Fn(DVec3) -> DVec3,
+    lag_km: f64,
+    n: usize,
+) -> f64 {
+    let (east, north) = east_north(centre);
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for i in 0..n {
+        for j in 0..n {
+            let off = east * ((i as f64 - n as f64 / 2.0) * 1.7)
+                + north * ((j as f64 - n as f64 / 2.0) * 1.7);
+            let p = (centre + off / RADIUS_KM).normalize();
+            let t = dir(p);
+            a.push(relief_at(amp, p, t, 0.0));
+            b.push(relief_at(amp, p, t, lag_km));
+        }
+    }
+    let m = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let (ma, mb) = (m(&a), m(&b));
+    let cov: f64 = a.iter().zip(&b).map(|(x, y)| (x - ma) * (y - mb)).sum();
+    let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
+    let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
+    cov / (va * vb).sqrt()
+}
+
+fn std_relief(amp: &Amplifier, centre: DVec3) -> f64 {
+    let (east, north) = east_north(centre);
+    let mut v = Vec::new();
+    for i in 0..40 {
+        for j in 0..40 {
+            let off = east * (i as f64 * 2.3) + north * (j as f64 * 2.3);
+            v.push(relief_at(
+                amp,
+                (centre + off / RADIUS_KM).normalize(),
+                east,
+                0.0,
+            ));
+        }
+    }
+    let m = v.iter().sum::<f64>() / v.len() as f64;
+    (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+#[test]
+fn same_seed_and_crust_same_bits_at_any_thread_count() {
+    let (mesh, crust) = synthetic(20_000, false, 10.0);
+    let grid = GeoGrid::region(-5.0, 15.0, 5.0, 45.0, 0.05).unwrap();
+    let run = |threads: usize, seed: u64| -> Vec<u32> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let amp = Amplifier::new(&mesh, &crust, seed, AmplifyOptions::default());
+            grid.sample(&|d| amp.elevation_m(d))
+                .iter()
+                .map(|v| v.to_bits())
+                .collect()
+        })
+    };
+    let a = run(1, 3);
+    assert_eq!(a, run(3, 3), "thread count changed the bits");
+    assert_eq!(a, run(2, 3));
+    let other = run(2, 4);
+    let differ = a.iter().zip(&other).filter(|(x, y)| x != y).count();
+    assert!(
+        differ > a.len() / 2,
+        "another seed should change the relief ({differ} of {} differ)",
+        a.len()
+    );
+}
+
+#[test]
+fn adjacent_tiles_agree_along_their_shared_edge() {
+    let (mesh, crust) = synthetic(20_000, false, 10.0);
+    let amp = Amplifier::new(&mesh, &crust, 1, AmplifyOptions::default());
+    let px = tectonic_planets::io::export::parse_resolution("100m", RADIUS_KM).unwrap();
+    // Two tiles side by side in longitude and one below, crossing the range and the coast.
+    // Regions given in degrees snap outward to the one lattice, so neighbours abut or share a
+    // column; a shared column has the same bits in both.
+    let a = GeoGrid::region(10.0, 29.8, 10.2, 30.0, px).unwrap();
+    let b_deg = GeoGrid::region(10.0, 30.0, 10.2, 30.2, px).unwrap();
+    let f = |d: DVec3| amp.elevation_m(d);
+    let overlap = a.i0 + i64::from(a.width) - b_deg.i0;
+    assert!(
+        (0..=1).contains(&overlap),
+        "neighbouring regions overlap by {overlap} columns"
+    );
+    if overlap == 1 {
+        let last = GeoGrid {
+            i0: b_deg.i0,
+            width: 1,
+            ..a
+        };
+        let first = GeoGrid { width: 1, ..b_deg };
+        assert_eq!(last.sample(&f), first.sample(&f));
+    }
+    // Tiles on the lattice: east and south neighbours of `a`, and their union.
+    let b = GeoGrid {
+        i0: a.i0 + i64::from(a.width),
+        ..a
+    };
+    let c = GeoGrid {
+        j0: a.j0 + i64::from(a.height),
+        ..a
+    };
+    let ab = GeoGrid {
+        width: 2 * a.width,
+        ..a
+    };
+    let (za, zb, zc, zab) = (a.sample(&f), b.sample(&f), c.sample(&f), ab.sample(&f));
+    let (w, h) = (a.width as usize, a.height as usize);
+    // The union tile is exactly the two tiles side by side: same bits.
+    for r in 0..h {
+        assert_eq!(
+            &zab[r * ab.width as usize..r * ab.width as usize + w],
+            &za[r * w..r * w + w]
+        );
+        assert_eq!(
+            &zab[r * ab.width as usize + w..(r + 1) * ab.width as usize],
+            &zb[r * b.width as usize..(r + 1) * b.width as usize]
+        );
+    }
+    // Across the seams the relief is continuous: the step between the last column of one tile
+    // and the first of the next is no larger than steps between columns inside a tile.
+    let ew_max = (0..h)
+        .flat_map(|r| (1..w).map(move |k| (r, k)))
+        .map(|(r, k)| (za[r * w + k] - za[r * w + k - 1]).abs())
+        .fold(0.0f32, f32::max);
+    let ns_max = (1..h)
+        .flat_map(|r| (0..w).map(move |k| (r, k)))
+        .map(|(r, k)| (za[r * w + k] - za[(r - 1) * w + k]).abs())
+        .fold(0.0f32, f32::max);
+    for r in 0..h {
+        let step = (zb[r * b.width as usize] - za[r * w + w - 1]).abs();
+        assert!(
+            step <= ew_max * 1.5 + 1.0,
+            "seam step {step} m at row {r}, inner max {ew_max}"
+        );
+    }
+    for k in 0..w {
+        let step = (zc[k] - za[(h - 1) * w + k]).abs();
+        assert!(
+            step <= ns_max * 1.5 + 1.0,
+            "north-south seam step {step} m at column {k}, inner max {ns_max}"
+        );
+    }
+    let inner_max = ew_max.min(ns_max);
+    assert!(inner_max > 1.0, "relief should not be flat");
+}
+
+#[test]
+fn hundred_metre_tile_averaged_down_matches_the_global_map() {
+    let (mesh, crust) = synthetic(20_000, false, 10.0);
+    let amp = Amplifier::new(&mesh, &crust, 2, AmplifyOptions::default());
+    // Global map 16384 wide: pixels of 360/16384°; the 100 m lattice has 24 pixels per global
+    // pixel (101.8 m).
+    let global = GeoGrid::global(16384, 8192).unwrap();
+    let k = 24i64;
+    let fine = GeoGrid {
+        dx_deg: global.dx_deg / k as f64,
+        dy_deg: global.dy_deg / k as f64,
+        ..global
+    };
+    let (mut diffs, mut relief) = (Vec::new(), Vec::new());
+    // Global pixels over the range, the plains and the ocean.
+    for (lat, lon) in [
+        (5.0, 30.0),
+        (-12.0, 25.0),
+        (20.0, 35.0),
+        (10.0, 50.0),
+        (0.0, 100.0),
+        (-20.0, -100.0),
+    ] {
+        for s in 0..12 {
+            let col = ((lon + 180.0) / global.dx_deg) as i64 + s * 7;
+            let row = ((90.0 - lat) / global.dy_deg) as i64 + s * 5;
+            let g = GeoGrid {
+                i0: col,
+                j0: row,
+                width: 1,
+                height: 1,
+                ..global
+            };
+            let d = g.direction(0, 0);
+            let z_global = f64::from(amp.elevation_m(d));
+            let tile = GeoGrid {
+                i0: col * k,
+                j0: row * k,
+                width: k as u32,
+                height: k as u32,
+                ..fine
+            };
+            let z = tile.sample(&|d| amp.elevation_m(d));
+            let mean = z.iter().map(|&v| f64::from(v)).sum::<f64>() / z.len() as f64;
+            diffs.push(mean - z_global);
+            relief.push(z_global - f64::from(amp.crust_elevation_m(d)));
+        }
+    }
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let mean = diffs.iter().sum::<f64>() / diffs.len() as f64;
+    let (rms_diff, rms_relief) = (rms(&diffs), rms(&relief));
+    println!(
+        "tile average − global: mean {mean:.1} m, rms {rms_diff:.1} m; relief rms {rms_relief:.1} m"
+    );
+    // Stated tolerance: the 2.4 km average keeps the relief coarser than a global pixel, so it
+    // differs from the global point sample by the sub-pixel relief only: RMS at most 150 m and
+    // under 60% of the relief's own RMS, with no bias beyond 40 m.
+    assert!(rms_diff < 150.0, "rms {rms_diff}");
+    assert!(
+        rms_diff < 0.6 * rms_relief,
+        "rms {rms_diff} vs relief {rms_relief}"
+    );
+    assert!(mean.abs() < 40.0, "bias {mean}");
+}
+
+#[test]
+fn mountain_relief_runs_along_the_fold_direction() {
+    let centre = from_lat_lon_deg(5.0, 30.0);
+    for fold_north in [false, true] {
+        let (mesh, crust) = synthetic(20_000, fold_north, 10.0);
+        let amp = Amplifier::new(&mesh, &crust, 5, AmplifyOptions::default());
+        let along = |p: DVec3| {
+            let (e, n) = east_north(p);
+            if fold_north { n } else { e }
+        };
+        let across = |p: DVec3| {
+            let (e, n) = east_north(p);
+            if fold_north { e } else { n }
+        };
+        let ca = lag_correlation(&amp, centre, along, 6.0, 40);
+        let cx = lag_correlation(&amp, centre, across, 6.0, 40);
+        println!("fold north={fold_north}: correlation at 6 km along {ca:.2}, across {cx:.2}");
+        assert!(
+            ca > cx + 0.25,
+            "fold north={fold_north}: along {ca:.2}, across {cx:.2}"
+        );
+    }
+}
+
+#[test]
+fn oceanic_relief_runs_across_ridges_and_is_stronger_on_young_floor() {
+    let (mesh, crust) = synthetic(20_000, false, 10.0);
+    let amp = Amplifier::new(&mesh, &crust, 6, AmplifyOptions::default());
+    let young = from_lat_lon_deg(10.0, 100.0);
+    let north = |p: DVec3| east_north(p).1;
+    let east = |p: DVec3| east_north(p).0;
+    // The ridge direction is north: transform-fault structure runs across it (east-west).
+    let ca = lag_correlation(&amp, young, north, 4.0, 40);
+    let cx = lag_correlation(&amp, young, east, 4.0, 40);
+    println!("ocean: correlation at 4 km along the ridge {ca:.2}, across {cx:.2}");
+    assert!(cx > ca + 0.25, "along {ca:.2}, across {cx:.2}");
+    let (s_young, s_old) = (
+        std_relief(&amp, young),
+        std_relief(&amp, from_lat_lon_deg(10.0, -100.0)),
+    );
+    println!("ocean relief std: young {s_young:.0} m, old {s_old:.0} m");
+    assert!(s_young > 1.8 * s_old, "young {s_young}, old {s_old}");
+}
+
+#[test]
+fn old_ranges_are_lower_and_smoother_than_young_ones() {
+    let centre = from_lat_lon_deg(0.0, 30.0);
+    let (mesh, young) = synthetic(20_000, false, 5.0);
+    let (_, old) = synthetic(20_000, false, 400.0);
+    let a_young = Amplifier::new(&mesh, &young, 8, AmplifyOptions::default());
+    let a_old = Amplifier::new(&mesh, &old, 8, AmplifyOptions::default());
+    let (sy, so) = (std_relief(&a_young, centre), std_relief(&a_old, centre));
+    // Smoother: the relief changes less between neighbours 0.5 km apart, relative to its size.
+    let rough = |a: &Amplifier| {
+        let (e, n) = east_north(centre);
+        let mut s = 0.0;
+        for i in 0..400 {
+            let p =
+                (centre + (e * (i as f64 * 0.9) + n * (i as f64 * 0.37)) / RADIUS_KM).normalize();
+            s += (relief_at(a, p, n, 0.5) - relief_at(a, p, n, 0.0)).powi(2);
+        }
+        (s / 400.0).sqrt()
+    };
+    let (ry, ro) = (rough(&a_young) / sy, rough(&a_old) / so);
+    println!(
+        "range relief std: young {sy:.0} m, old {so:.0} m; roughness young {ry:.3}, old {ro:.3}"
+    );
+    assert!(so < 0.7 * sy, "old {so} vs young {sy}");
+    assert!(ro < ry, "old roughness {ro} vs young {ry}");
+    // And plains are gentle next to both.
+    let plain = std_relief(&a_young, from_lat_lon_deg(0.0, 8.0));
+    assert!(plain < 0.25 * so, "plain relief {plain} m");
+}
+
+#[test]
+fn exemplars_follow_the_fold_direction_and_replace_procedural_relief() {
+    let (mesh, crust) = synthetic(20_000, true, 10.0);
+    // One Andean exemplar with ridges along its rows' direction (angle 0), 200 m pixels.
+    let z = synthetic_exemplar(128, 0.0, 20.0, 2500.0, 9);
+    let e = Exemplar::from_elevations("synthetic".into(), 128, 128, &z, 0.2).unwrap();
+    let mut set = ExemplarSet::default();
+    set.push(TerrainType::Andean, e);
+    let opts = AmplifyOptions::default();
+    let proc_amp = Amplifier::new(&mesh, &crust, 5, opts);
+    let ex_amp = Amplifier::new(&mesh, &crust, 5, opts).with_exemplars(set, 5, opts);
+    let centre = from_lat_lon_deg(5.0, 30.0);
+    let assigned = ex_amp.vertices.iter().filter(|v| v.exemplar > 0).count();
+    assert!(assigned > 100, "{assigned} vertices got an exemplar");
+    let p = from_lat_lon_deg(5.1, 30.1);
+    assert_ne!(proc_amp.elevation_m(p), ex_amp.elevation_m(p));
+    let north = |p: DVec3| east_north(p).1;
+    let east = |p: DVec3| east_north(p).0;
+    let ca = lag_correlation(&ex_amp, centre, north, 3.0, 40);
+    let cx = lag_correlation(&ex_amp, centre, east, 3.0, 40);
+    println!("exemplar relief: correlation at 3 km along the fold {ca:.2}, across {cx:.2}");
+    assert!(ca > cx + 0.2, "along {ca:.2}, across {cx:.2}");
+}
+
+#[test]
+fn shipped_exemplars_load() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/exemplars");
+    let set = ExemplarSet::load_dir(&dir).unwrap();
+    for ty in TerrainType::ALL {
+        assert!(
+            !set.by_type[ty as usize].is_empty(),
+            "no {} exemplar",
+            ty.folder()
+        );
+    }
+    for e in &set.exemplars {
+        assert!(e.range_m.1 > e.range_m.0, "{}: flat", e.path.display());
+    }
+}
+
+#[test]
+fn amplify_cpu_matches_the_point_function_and_keeps_bounds() {
+    let (mesh, crust) = synthetic(20_000, false, 10.0);
+    let amp = Amplifier::new(&mesh, &crust, 3, AmplifyOptions::default());
+    let grid = GeoGrid::region(-40.0, -20.0, 40.0, 80.0, 0.5).unwrap();
+    let queries: Vec<AmplifyQuery> = (0..grid.height)
+        .flat_map(|r| (0..grid.width).map(move |c| (c, r)))
+        .map(|(c, r)| amp.query(grid.direction(c, r)))
+        .collect();
+    let u = AmplifyUniform {
+        count: queries.len() as u32,
+        ..amp.uniform
+    };
+    let mut out = vec![0.0f32; queries.len()];
+    amplify_cpu(&u, &amp.vertices, &queries, &mut out);
+    let (lo, hi) = amp.range_m();
+    for (q, &z) in queries.iter().zip(&out) {
+        assert_eq!(z.to_bits(), amplify_point(&u, &amp.vertices, q).to_bits());
+        assert!(
+            z.is_finite() && z >= lo && z <= hi,
+            "{z} outside {lo}..{hi}"
+        );
+    }
+    // Relief scale 0 gives the crust back.
+    let flat = Amplifier::new(
+        &mesh,
+        &crust,
+        3,
+        AmplifyOptions {
+            relief_scale: 0.0,
+            ..Default::default()
+        },
+    );
+    let d = from_lat_lon_deg(3.0, 31.0);
+    assert_eq!(flat.elevation_m(d), flat.crust_elevation_m(d));
+}
+
+#[test]
+fn amplify_shader_validates_and_matches_the_rust_layout() {
+    let src = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/shaders/amplify.wgsl"))
+        .unwrap();
+    let module =
+        naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+    let info = naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::empty(),
+    )
+    .validate(&module);
+    if let Err(e) = info {
+        panic!("amplify.wgsl does not validate: {}", e.emit_to_string(&src));
+    }
+    let mut layouter = naga::proc::Layouter::default();
+    layouter.update(module.to_ctx()).unwrap();
+    let size_of = |name: &str| {
+        let (h, _) = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some(name))
+            .unwrap_or_else(|| panic!("no struct {name} in the shader"));
+        layouter[h].size as usize
+    };
+    assert_eq!(
+        size_of("AmplifyVertex"),
+        std::mem::size_of::<AmplifyVertex>()
+    );
+    assert_eq!(size_of("AmplifyQuery"), std::mem::size_of::<AmplifyQuery>());
+    assert_eq!(
+        size_of("AmplifyUniform"),
+        std::mem::size_of::<AmplifyUniform>()
+    );
+    // The shader carries the same constants as the CPU reference.
+    for c in [
+        "RIDGE_MEAN: f32 = 0.62",
+        "ANDEAN_AMP_M: f32 = 1300.0",
+        "FAULT_SPACING_KM: f32 = 60.0",
+        "MAX_RELIEF_M: f32 = 4000.0",
+    ] {
+        assert!(src.contains(c), "shader lacks `{c}`");
+    }
+}

@@ -229,7 +229,28 @@ struct BenchArgs {
     resamplings: u64,
 }
 
+/// Mesa's Vulkan drivers (probed by `--backend auto`) print an error on every adapter request
+/// when `XDG_RUNTIME_DIR` is unset, as on servers and in containers. Give them a private
+/// directory, before any thread starts.
+fn ensure_runtime_dir() {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_some() {
+        return;
+    }
+    let user = std::env::var("USER").unwrap_or_default();
+    let dir = std::env::temp_dir().join(format!("planet-runtime-{user}"));
+    if std::fs::create_dir_all(&dir).is_ok() {
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let _ = std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700));
+        }
+        // SAFETY: called first thing in `main`, before any other thread exists.
+        unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
+    }
+}
+
 fn main() {
+    ensure_runtime_dir();
     let filter =
         tracing_subscriber::EnvFilter::try_from_env("PLANET_LOG").unwrap_or_else(|_| "warn".into());
     tracing_subscriber::fmt()

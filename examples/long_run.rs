@@ -6,7 +6,8 @@
 //!
 //! `cargo run --release --example long_run -- [samples] [steps] [seeds...]`
 //! (defaults: 100,000 samples, 1000 steps, seeds 1–5; `PLANET_LOG` for logs, `RIFT_RATE` to try
-//! another `rifting.frequency_per_my`).
+//! another `rifting.frequency_per_my`, `TRACE_PEAK` to print every step that raised the peak
+//! memory, with what happened in it).
 use tectonic_planets::prelude::*;
 use tectonic_planets::resources::Sutures;
 use tectonic_planets::systems::rifting::{RiftCause, RiftLog};
@@ -65,8 +66,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (mut plates_lo, mut plates_hi) = (usize::MAX, 0usize);
         let (mut land_lo, mut land_hi, mut zmax, mut worst) = (1.0f64, 0.0f64, f32::MIN, 0.0f64);
         let mut peak_at_100 = 0;
+        let trace_peak = std::env::var_os("TRACE_PEAK").is_some();
+        let mut last_peak = peak_rss();
         for step in 1..=steps {
+            let resamplings = sim.clock().resamplings;
+            let rifts = sim.world().resource::<RiftLog>().events.len();
+            let sutures = sim.world().resource::<Sutures>().total;
             sim.step()?;
+            if trace_peak && peak_rss() > last_peak {
+                let p = peak_rss();
+                println!(
+                    "  step {step}: peak +{:.2} MB to {:.1} MB (resampled {}, rifts {}, collisions {}, plates {}, resident {:.1} MB)",
+                    (p - last_peak) as f64 / 1e6,
+                    p as f64 / 1e6,
+                    sim.clock().resamplings - resamplings,
+                    sim.world().resource::<RiftLog>().events.len() - rifts,
+                    sim.world().resource::<Sutures>().total - sutures,
+                    sim.stats().plates,
+                    rss() as f64 / 1e6
+                );
+                last_peak = p;
+            }
             let s = sim.stats().clone();
             plates_lo = plates_lo.min(s.plates);
             plates_hi = plates_hi.max(s.plates);

@@ -52,6 +52,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     } else {
         vec![1, 2, 3, 4, 5]
     };
+    if seeds.len() > 1 {
+        // One process per seed, so that each seed's peak memory is its own.
+        let exe = std::env::current_exe()?;
+        let mut failed = Vec::new();
+        for seed in &seeds {
+            let status = std::process::Command::new(&exe)
+                .args([samples.to_string(), steps.to_string(), seed.to_string()])
+                .status()?;
+            if !status.success() {
+                failed.push(*seed);
+            }
+        }
+        if failed.is_empty() {
+            println!("all seeds meet the long-run criteria");
+            return Ok(());
+        }
+        println!("seeds failing the long-run criteria: {failed:?}");
+        std::process::exit(1);
+    }
     let mut failed = Vec::new();
     for seed in seeds {
         let mut p = Params::default();

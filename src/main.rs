@@ -573,6 +573,19 @@ fn bench(a: BenchArgs) -> Result<()> {
             .median_ms("after_resample")
             .unwrap_or(f64::NAN)
     );
+    println!(
+        "{:<28} {:>10.1} ms",
+        "  of which locate (median)",
+        sim.timings()
+            .median_ms("resample_locate")
+            .unwrap_or(f64::NAN)
+    );
+    if let Some(t) = gpu_traffic(&sim) {
+        println!(
+            "{:<28} {:>10} on the GPU, {} samples left to the CPU",
+            "point locations", t.locations, t.rechecked_samples
+        );
+    }
     if let (Some(t0), Some(t1)) = (traffic0, traffic1) {
         let steps = a.steps.max(1) as f64;
         println!(

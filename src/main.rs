@@ -956,6 +956,19 @@ fn bench(a: BenchArgs) -> Result<()> {
             .unwrap_or(f64::NAN)
     );
     println!(
+        "{:<28} {:>10.1} ms",
+        "  of which locate (median)",
+        sim.timings()
+            .median_ms("resample_locate")
+            .unwrap_or(f64::NAN)
+    );
+    if let Some(t) = gpu_traffic(&sim) {
+        println!(
+            "{:<28} {:>10} on the GPU, {} samples left to the CPU",
+            "point locations", t.locations, t.rechecked_samples
+        );
+    }
+    println!(
         "{:<28} {:>10.1} ms  ({} rifts of the largest plate into 2)",
         "one rift (median)",
         median(&rift_ms),

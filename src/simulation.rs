@@ -401,7 +401,7 @@ impl Simulation {
             pairs: &pairs,
             ..Default::default()
         };
-        resample::locate_sources(mesh, crust, &table, &rules, &mut sources);
+        resample::resample_locate_cpu(mesh, crust, &table, &rules, &mut sources);
         resample::interpolate(mesh, crust, &table, &sources, &mut next);
         let gaps = resample::gaps_from_nearest(mesh, &sources, &mut next);
         if ocean_on {

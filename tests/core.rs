@@ -68,9 +68,9 @@ fn plates_turning_together_keep_their_continents() {
     p.resample.min_interval_steps = 10;
     p.resample.max_interval_steps = 10;
     let mut sim = Simulation::new(p).unwrap();
-    // Erosion lowers coasts and the terrane pass welds trapped seas into continents, for
-    // reasons of their own; this test is about moving and resampling.
-    for name in ["erosion", "terranes", "collision"] {
+    // Erosion lowers coasts, the terrane pass welds trapped seas into continents and rifts send
+    // fragments apart, for reasons of their own; this test is about moving and resampling.
+    for name in ["erosion", "terranes", "collision", "rifting"] {
         sim.set_enabled(name, false).unwrap();
     }
     let pole = DVec3::new(0.3, -0.5, 0.8).normalize();

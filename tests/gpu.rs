@@ -9,6 +9,10 @@ use std::path::PathBuf;
 
 use tectonic_planets::gpu::aging::{aging_cpu, aging_dispatch};
 use tectonic_planets::gpu::erosion::{ErosionRates, erosion_cpu, erosion_dispatch};
+use tectonic_planets::gpu::resample_locate::{
+    CellPlates, OverlapRules, SampleSource, resample_locate_cpu, resample_locate_gpu,
+    resample_locate_raw,
+};
 use tectonic_planets::gpu::subduction_uplift::{
     UpliftConstants, read_back, subduction_uplift_cpu, subduction_uplift_dispatch,
 };
@@ -16,7 +20,8 @@ use tectonic_planets::gpu::{BackendChoice, GpuContext, select_backend, shader_so
 use tectonic_planets::prelude::*;
 use tectonic_planets::random::SimRng;
 use tectonic_planets::resources::convergence::NONE;
-use tectonic_planets::resources::{ConvergenceField, FrontPoints};
+use tectonic_planets::resources::{ConvergenceField, FrontPoints, PlateTable};
+use tectonic_planets::systems::resample::{interpolate, plate_geometry};
 
 fn shader_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("shaders")
@@ -45,7 +50,7 @@ fn every_shader_validates_with_naga() {
         .iter()
         .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
         .collect();
-    for expected in ["aging", "erosion", "subduction_uplift"] {
+    for expected in ["aging", "erosion", "resample_locate", "subduction_uplift"] {
         assert!(
             names.iter().any(|n| n == expected),
             "shaders/{expected}.wgsl missing (found {names:?})"
@@ -298,6 +303,231 @@ fn subduction_uplift_kernel_matches_cpu_reference() {
     );
 }
 
+/// What [`random_plates`] makes: the old crust, the moved plates and the overlap rules' data.
+struct RandomPlates {
+    crust: Crust,
+    table: PlateTable,
+    pairs: Vec<(u32, u32)>,
+    suture_of_sample: Vec<u32>,
+    suture_target: Vec<u32>,
+}
+
+/// A random plate configuration on `mesh`: 8 to 19 Voronoi plates, continental blobs across
+/// plate boundaries, every plate turned by a fresh random rotation of up to `max_angle` radians
+/// (several sample spacings: overlaps and gaps), override pairs for about half of the ordered
+/// plate pairs and two pending sutures.
+fn random_plates(mesh: &SphereMesh, rng: &mut SimRng, max_angle: f64) -> RandomPlates {
+    use glam::{DQuat, DVec3};
+    use tectonic_planets::random::unit_vector;
+    let n = mesh.len();
+    let k = 8 + (rng.next_u64() % 12) as usize;
+    let centers: Vec<DVec3> = (0..k)
+        .map(|_| unit_vector(rng.next_u64(), rng.next_u64()))
+        .collect();
+    let blobs: Vec<(DVec3, f64)> = (0..6)
+        .map(|_| {
+            (
+                unit_vector(rng.next_u64(), rng.next_u64()),
+                0.3 + 0.6 * rng.next_f64(),
+            )
+        })
+        .collect();
+    let mut crust = random_crust(n, rng);
+    for (i, p) in mesh.positions.iter().enumerate() {
+        let (best, _) = centers
+            .iter()
+            .enumerate()
+            .map(|(c, x)| (c, p.dot(*x)))
+            .fold((0, f64::MIN), |a, b| if b.1 > a.1 { b } else { a });
+        crust.plate[i] = best as u32;
+        crust.crust_type[i] = if blobs.iter().any(|(c, r)| p.dot(*c) > r.cos()) {
+            CrustType::Continental
+        } else {
+            CrustType::Oceanic
+        };
+    }
+    let geometry = plate_geometry(mesh, &crust);
+    let plates: Vec<_> = geometry
+        .iter()
+        .enumerate()
+        .filter_map(|(id, g)| {
+            let g = g.as_ref()?;
+            let axis = unit_vector(rng.next_u64(), rng.next_u64());
+            let angle = rng.next_f64() * max_angle;
+            Some((
+                Plate {
+                    id: PlateId(id as u32),
+                },
+                PlateMotion {
+                    euler_pole: axis,
+                    angular_speed_rad_per_my: 0.0,
+                },
+                PlateFrame {
+                    world_from_plate: DQuat::from_axis_angle(axis, angle),
+                },
+                g.bounds?,
+                g.stats,
+            ))
+        })
+        .collect();
+    let table = PlateTable::from_plates(plates.into_iter());
+    // About half of all ordered pairs, so that many overlaps of equal crust are decided by a
+    // pair rather than by rank.
+    let mut pairs: Vec<(u32, u32)> = Vec::new();
+    for a in 0..k as u32 {
+        for b in 0..k as u32 {
+            if a != b && rng.next_f64() < 0.5 {
+                pairs.push((a, b));
+            }
+        }
+    }
+    pairs.sort();
+    pairs.dedup();
+    let mut suture_of_sample = vec![u32::MAX; n];
+    let mut suture_target = Vec::new();
+    for s in 0..2u32 {
+        let from = (rng.next_u64() % k as u64) as u32;
+        let to = (from + 1) % k as u32;
+        let center = centers[from as usize];
+        for (i, p) in mesh.positions.iter().enumerate() {
+            if crust.plate[i] == from && p.dot(center) > 0.2f64.cos() {
+                suture_of_sample[i] = s;
+            }
+        }
+        suture_target.push(to);
+    }
+    RandomPlates {
+        crust,
+        table,
+        pairs,
+        suture_of_sample,
+        suture_target,
+    }
+}
+
+/// The discrete part of a source (everything but the weights).
+fn discrete(s: &SampleSource) -> (u32, u32, u32, bool, u32) {
+    (s.slot, s.plate, s.suture, s.continental_lost, s.triangle)
+}
+
+#[test]
+fn resample_locate_kernel_matches_cpu_reference() {
+    let Some(mut ctx) = gpu_or_skip("resample_locate") else {
+        return;
+    };
+    let seed = fresh_seed();
+    eprintln!("resample_locate: seed {seed} (GPU_TEST_SEED={seed} replays it)");
+    let mut rng = SimRng::new(seed, 4);
+    let mesh = SphereMesh::fibonacci(N, 0.3, seed, 6370.0).expect("mesh");
+    let RandomPlates {
+        crust,
+        table,
+        pairs,
+        suture_of_sample,
+        suture_target,
+    } = random_plates(&mesh, &mut rng, 0.05);
+    let rules = OverlapRules {
+        pairs: &pairs,
+        suture_of_sample: &suture_of_sample,
+        suture_target: &suture_target,
+    };
+    let mut cpu = Vec::new();
+    resample_locate_cpu(&mesh, &crust, &table, &rules, &mut cpu);
+    let gaps = cpu.iter().filter(|s| s.is_gap()).count();
+    let sutured = cpu.iter().filter(|s| s.suture != u32::MAX).count();
+    let lost = cpu.iter().filter(|s| s.continental_lost).count();
+    eprintln!(
+        "{} plates, {} pairs; CPU: {gaps} gaps, {sutured} sutured, {lost} lost continental",
+        table.plates.len(),
+        pairs.len()
+    );
+    assert!(
+        gaps > 0 && gaps < N / 5 && sutured > 0,
+        "seed {seed}: configuration too tame ({gaps} gaps, {sutured} sutured)"
+    );
+
+    // The kernel alone. Its output starts poisoned (the host vector is all ones: NaN weights,
+    // gaps), so a dispatch or readback that writes nothing cannot pass.
+    let cells = CellPlates::build(&mesh, &crust, &table);
+    let (raw, doubtful) =
+        resample_locate_raw(&mut ctx, &mesh, &crust, &table, &rules, &cells).expect("kernel");
+    let mut is_doubtful = vec![false; N];
+    for &j in &doubtful {
+        is_doubtful[j as usize] = true;
+    }
+    let mut raw_mismatch = 0;
+    let mut max_dw: f32 = 0.0;
+    for j in 0..N {
+        if is_doubtful[j] {
+            continue;
+        }
+        if discrete(&raw[j]) != discrete(&cpu[j]) {
+            raw_mismatch += 1;
+            if raw_mismatch <= 5 {
+                eprintln!("sample {j}: gpu {:?} cpu {:?}", raw[j], cpu[j]);
+            }
+            continue;
+        }
+        for k in 0..3 {
+            max_dw = max_dw.max((raw[j].weights[k] - cpu[j].weights[k]).abs());
+        }
+    }
+    eprintln!(
+        "kernel: {} samples ({:.3}%) left to the CPU, {raw_mismatch} decided differently, \
+         largest weight difference {max_dw:e}",
+        doubtful.len(),
+        100.0 * doubtful.len() as f64 / N as f64
+    );
+    // Tolerances: the samples the kernel decides (all but the flagged ones) get the CPU's slot,
+    // plate, suture, lost flag and triangle except at most 0.1% of them (f32 geometry against
+    // f64: the flagging margins are meant to make this 0); weights within 1e-3 (measured: about
+    // 1e-5); at most 5% of the samples flagged (measured: about 1–2%).
+    assert!(
+        raw_mismatch * 1000 <= N,
+        "seed {seed}: {raw_mismatch} mismatches"
+    );
+    assert!(max_dw <= 1e-3, "seed {seed}: weights differ by {max_dw}");
+    assert!(
+        doubtful.len() * 20 <= N,
+        "seed {seed}: {} samples left to the CPU",
+        doubtful.len()
+    );
+
+    // The whole GPU location (flagged samples redone on the CPU), then the CPU interpolation.
+    let mut gpu = vec![SampleSource::default(); 3];
+    let report =
+        resample_locate_gpu(&mut ctx, &mesh, &crust, &table, &rules, &mut gpu).expect("gpu");
+    assert_eq!(gpu.len(), N);
+    assert_eq!(report.rechecked, doubtful.len());
+    let mismatch = (0..N)
+        .filter(|&j| discrete(&gpu[j]) != discrete(&cpu[j]))
+        .count();
+    assert!(mismatch * 1000 <= N, "seed {seed}: {mismatch} mismatches");
+    assert_eq!(
+        gpu.iter().filter(|s| s.is_gap()).count(),
+        gaps,
+        "seed {seed}: gaps differ"
+    );
+    let (mut next_cpu, mut next_gpu) = (Crust::default(), Crust::default());
+    interpolate(&mesh, &crust, &table, &cpu, &mut next_cpu);
+    interpolate(&mesh, &crust, &table, &gpu, &mut next_gpu);
+    // Tolerance: elevation within 1 m (weights differ by ~1e-5 over ±10 km of relief), except
+    // at samples located differently or whose crust type vote (a weight sum at 1/2) flipped:
+    // at most 0.1% of the samples.
+    let mut off = 0;
+    let mut max_dz: f32 = 0.0;
+    for j in 0..N {
+        let dz = (next_gpu.elevation_km[j] - next_cpu.elevation_km[j]).abs();
+        if dz.is_nan() || dz > 1e-3 {
+            off += 1;
+        } else {
+            max_dz = max_dz.max(dz);
+        }
+    }
+    eprintln!("interpolated: {off} samples off by more than 1 m; largest other {max_dz:e} km");
+    assert!(off * 1000 <= N, "seed {seed}: {off} elevations off");
+}
+
 /// Area-weighted agreement of the land masks and RMS elevation difference, metres.
 fn compare(mesh: &SphereMesh, a: &Crust, b: &Crust) -> (f64, f64) {
     let total: f64 = mesh.area_km2.iter().sum();
@@ -333,6 +563,13 @@ fn fifty_steps_on_gpu_match_fifty_steps_on_cpu() {
     // Every step ran erosion and aging on the device (and uplift where fronts exist), and the
     // crust went up only when the host changed it (resamplings, collisions), not every step.
     assert!(traffic.dispatches >= 100, "{traffic:?}");
+    // Every resampling located its samples on the device, most of them there.
+    assert!(resamplings > 0);
+    assert_eq!(traffic.locations, resamplings, "{traffic:?}");
+    assert!(
+        traffic.rechecked_samples * 20 <= resamplings * 30_000,
+        "{traffic:?}"
+    );
     assert!(
         traffic.crust_uploads <= 2 * resamplings + 1 && traffic.crust_uploads < 50,
         "{traffic:?}, {resamplings} resamplings"

@@ -205,6 +205,22 @@ impl MeshLocator {
         face as usize * g * g + to_cell(v) * g + to_cell(u)
     }
 
+    /// Cells along one edge of a cube face (the grid has `6·grid²` cells).
+    pub fn grid(&self) -> usize {
+        self.grid
+    }
+
+    /// Where each cell's triangles start in [`Self::cell_triangle_list`] (one entry per cell and
+    /// a final one for the end).
+    pub fn cell_starts(&self) -> &[u32] {
+        &self.cell_start
+    }
+
+    /// The triangles of every cell, cell after cell.
+    pub fn cell_triangle_list(&self) -> &[u32] {
+        &self.cell_triangles
+    }
+
     /// Bytes held by the grid.
     pub fn heap_bytes(&self) -> usize {
         (self.cell_start.capacity() + self.cell_triangles.capacity()) * 4

@@ -14,11 +14,15 @@
 //!   later in the step and the next step read them), and the device copy is marked in sync.
 //! - The convergence field (distances to the fronts) goes up once per resampling; per step only
 //!   the front-point table (32 bytes a point) and the kernels' uniforms go up.
+//! - The resampling's point location ([`resample_locate`]) keeps the reference mesh and its
+//!   locator on the device for the whole run; per resampling it uploads the plate table and the
+//!   old crust's plates and crust types, and reads back one located source per sample.
 //!
 //! [`GpuTraffic`] counts the bytes both ways; `planet bench --backend gpu` prints them per step.
 
 pub mod aging;
 pub mod erosion;
+pub mod resample_locate;
 pub mod subduction_uplift;
 
 use std::sync::{Arc, Mutex};
@@ -122,6 +126,10 @@ pub struct GpuTraffic {
     pub dispatches: u64,
     /// Full uploads of the resident crust.
     pub crust_uploads: u64,
+    /// Resamplings whose point location ran on the device.
+    pub locations: u64,
+    /// Samples of those locations that the kernel left to the CPU (near an edge or a tie).
+    pub rechecked_samples: u64,
 }
 
 /// The crust fields resident on the device (see the module documentation).
@@ -156,6 +164,7 @@ pub struct GpuContext {
     pub(crate) erosion: erosion::ErosionKernel,
     pub(crate) aging: aging::AgingKernel,
     pub(crate) uplift: subduction_uplift::UpliftKernel,
+    pub(crate) locate: resample_locate::LocateKernel,
     crust: Option<CrustBuffers>,
     crust_synced: Option<Tick>,
     staging: Option<wgpu::Buffer>,
@@ -274,6 +283,7 @@ impl GpuContext {
         let erosion = erosion::ErosionKernel::new(&device);
         let aging = aging::AgingKernel::new(&device);
         let uplift = subduction_uplift::UpliftKernel::new(&device);
+        let locate = resample_locate::LocateKernel::new(&device);
         let ctx = Self {
             device,
             queue,
@@ -282,6 +292,7 @@ impl GpuContext {
             erosion,
             aging,
             uplift,
+            locate,
             crust: None,
             crust_synced: None,
             staging: None,

@@ -25,6 +25,7 @@ use crate::components::{
     Plate, PlateBounds, PlateFrame, PlateId, PlateMesh, PlateMotion, PlateStats,
 };
 use crate::geometry::{SphereMesh, angle_between};
+use crate::gpu::{GpuContext, run_or_record};
 use crate::io::params::Params;
 use crate::resources::{
     Crust, CrustType, NO_PLATE, NextPlateId, PlateTable, ResampleRequest, SimClock, StepTimings,
@@ -163,6 +164,11 @@ impl CellPlates {
         Self { cells }
     }
 
+    /// The lists, one `[u16; 4]` per locator cell (what the GPU kernel reads).
+    pub fn lists(&self) -> &[[u16; 4]] {
+        &self.cells
+    }
+
     /// Whether plate `slot` may cover points of cell `c`.
     #[inline]
     pub fn may_cover(&self, c: usize, slot: u32) -> bool {
@@ -184,7 +190,9 @@ pub struct OverlapRules<'a> {
 }
 
 /// Finds, for every reference sample, the plate that covers it and where (see module docs).
-pub fn locate_sources(
+/// This is the CPU backend's point location and the reference of the GPU kernel
+/// `shaders/resample_locate.wgsl` (`crate::gpu::resample_locate`).
+pub fn resample_locate_cpu(
     mesh: &SphereMesh,
     old: &Crust,
     table: &PlateTable,
@@ -847,7 +855,8 @@ pub fn resample_due(
     max_angle * params.planet.radius_km >= params.resample.adaptive_displacement_km
 }
 
-/// First system of a resampling: locates every sample in the moved plates, interpolates, finds
+/// First system of a resampling: locates every sample in the moved plates (on the GPU when a
+/// [`GpuContext`] is installed, see `crate::gpu::resample_locate`), interpolates, finds
 /// the gaps and their nearest plates, and fills gaps with the nearest plate's data (gap-filler
 /// plugins overwrite that next).
 #[allow(clippy::too_many_arguments)]
@@ -861,6 +870,8 @@ pub fn resample_interpolate(
     terranes: Option<Res<TerraneField>>,
     mut sutures: Option<ResMut<Sutures>>,
     mut work: ResMut<ResampleWork>,
+    mut gpu: Option<ResMut<GpuContext>>,
+    timings: Option<ResMut<StepTimings>>,
 ) {
     let started = Instant::now();
     let table = PlateTable::from_query(&plates);
@@ -896,7 +907,25 @@ pub fn resample_interpolate(
         *t = Instant::now();
     };
     let mut t = Instant::now();
-    locate_sources(&mesh, &crust, &table, &rules, &mut work.sources);
+    let on_gpu = gpu.as_mut().is_some_and(|g| {
+        run_or_record(g, |g| {
+            crate::gpu::resample_locate::resample_locate_gpu(
+                g,
+                &mesh,
+                &crust,
+                &table,
+                &rules,
+                &mut work.sources,
+            )
+            .map(|r| tracing::debug!(rechecked = r.rechecked, "resample: located on the GPU"))
+        })
+    });
+    if !on_gpu {
+        resample_locate_cpu(&mesh, &crust, &table, &rules, &mut work.sources);
+    }
+    if let Some(mut timings) = timings {
+        timings.record("resample_locate", t.elapsed());
+    }
     lap("locate", &mut t);
     let lost: f64 = work
         .sources

@@ -1,0 +1,380 @@
+//! Host side of `shaders/resample_locate.wgsl`: the point location of a global resampling (for
+//! every reference sample, the covering plate after the plates moved, the triangle in that
+//! plate's frame, the barycentric weights, the suture and the lost-continent flag; gaps are the
+//! samples no plate covers). The CPU reference is [`resample_locate_cpu`], the function the CPU
+//! backend runs (`src/systems/resample.rs`); the interpolation of the crust fields from the
+//! located sources, the gap search and the rebuild stay on the CPU on both backends.
+//!
+//! What crosses the bus:
+//! - **Once per run** (per mesh): the reference positions as f32 (12 bytes a sample), the
+//!   triangles (12 bytes a triangle, about 24 bytes a sample) and the cube-map locator's cells
+//!   (cell starts and triangle lists, about 20 bytes a sample).
+//! - **Per resampling:** the plate table in rank order (rotation plate ← world, cap centroid and
+//!   radius, id, slot: 64 bytes a plate), the override pairs, the suture targets, the locator
+//!   cells' plate lists (8 bytes a cell), the old crust's plate ids and crust types (5 bytes a
+//!   sample) and, when sutures are pending, the suture of every old sample (4 bytes a sample).
+//!   Read back: 32 bytes a sample.
+//!
+//! Precision: the GPU works in f32, the CPU in f64. Where f32 rounding could change a decision
+//! (near a triangle edge or vertex, a tie of corners, a continental weight near 1/2, a locator
+//! cell boundary, a cap rim), the kernel flags the sample and the host locates it again with
+//! [`locate_one`], the CPU code. All other samples get the CPU's plate, slot, suture, flags and
+//! triangle exactly, and weights within about 1e-5 of the CPU's.
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::geometry::SphereMesh;
+use crate::gpu::{GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer};
+use crate::resources::{Crust, NO_PLATE, PlateTable};
+pub use crate::systems::resample::{
+    CellPlates, OverlapRules, SampleSource, locate_one, resample_locate_cpu,
+};
+
+/// The kernel's WGSL.
+pub const WGSL: &str = include_str!("../../shaders/resample_locate.wgsl");
+
+/// Flag of the kernel's output: another plate's continental crust went under here.
+const FLAG_CONTINENTAL_LOST: u32 = 1;
+/// Flag of the kernel's output: the host must locate this sample again in f64.
+const FLAG_DOUBT: u32 = 2;
+
+/// Uniforms of one location pass. Keep in sync with `LocateUniforms` in
+/// shaders/resample_locate.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct LocateUniforms {
+    /// Samples.
+    pub count: u32,
+    /// Threads per dispatch row.
+    pub row_stride: u32,
+    /// Plates.
+    pub plate_count: u32,
+    /// Override pairs.
+    pub pair_count: u32,
+    /// Entries of the per-sample suture buffer (0 when no suture is pending).
+    pub suture_len: u32,
+    /// Locator cells along a face edge.
+    pub grid: u32,
+    /// Locator cells.
+    pub cell_count: u32,
+    /// Word offset of the override pairs in the auxiliary buffer.
+    pub pairs_at: u32,
+    /// Word offset of the suture targets in the auxiliary buffer.
+    pub targets_at: u32,
+    /// Word offset of the cell plate lists in the auxiliary buffer.
+    pub cells_at: u32,
+    /// Barycentric margin under which a decision is left to the CPU.
+    pub doubt_w: f32,
+    /// Margin (in cells) around locator cell boundaries left to the CPU.
+    pub doubt_cell: f32,
+}
+
+/// One plate as the kernel reads it (16 words). Keep in sync with `PLATE_WORDS` and the reads
+/// in shaders/resample_locate.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuPlate {
+    /// Rows of the rotation plate ← world, each followed by one coordinate of the cap centroid
+    /// (world frame): `[r0.x, r0.y, r0.z, c.x, r1.x, …, c.z]`.
+    pub rows_centroid: [f32; 12],
+    /// Cosine of the cap radius.
+    pub cap_cos: f32,
+    /// Plate id.
+    pub id: u32,
+    /// Slot in the plate table.
+    pub slot: u32,
+    /// Padding.
+    pub _pad: u32,
+}
+
+/// The mesh on the device (uploaded once per mesh).
+struct MeshBuffers {
+    key: (usize, usize, usize),
+    positions: wgpu::Buffer,
+    triangles: wgpu::Buffer,
+    cells: wgpu::Buffer,
+    cell_count: u32,
+    grid: u32,
+}
+
+/// Pipeline, uniforms and the resident mesh.
+pub(crate) struct LocateKernel {
+    pipeline: wgpu::ComputePipeline,
+    uniforms: wgpu::Buffer,
+    mesh: Option<MeshBuffers>,
+}
+
+impl LocateKernel {
+    pub(crate) fn new(device: &wgpu::Device) -> Self {
+        Self {
+            pipeline: compute_pipeline(device, "resample_locate", WGSL),
+            uniforms: uniform_buffer(
+                device,
+                "resample_locate uniforms",
+                std::mem::size_of::<LocateUniforms>(),
+            ),
+            mesh: None,
+        }
+    }
+}
+
+/// What a GPU location did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LocateReport {
+    /// Samples whose decision the kernel left to the CPU (located again with [`locate_one`]).
+    pub rechecked: usize,
+    /// Samples no plate covers (gaps).
+    pub gaps: usize,
+}
+
+/// The barycentric margin under which the kernel leaves a decision to the CPU, for a mesh of
+/// mean spacing `spacing_rad`. The f32 rounding of positions and rotations (~1e-7) over the
+/// triangle size (~the spacing) bounds the error of f32 weights; the margin is about 20 times
+/// that, and at least 1e-4.
+pub fn doubt_margin(spacing_rad: f64) -> f32 {
+    (2e-6 / spacing_rad.max(1e-9)).clamp(1e-4, 0.05) as f32
+}
+
+fn too_large(what: &str, bytes: usize, limit: u64) -> Result<(), GpuError> {
+    if bytes as u64 > limit {
+        return Err(GpuError::TooLarge(format!(
+            "resample_locate: {what} needs {bytes} bytes, more than the device's storage binding \
+             limit of {limit} bytes"
+        )));
+    }
+    Ok(())
+}
+
+fn ensure_mesh(ctx: &mut GpuContext, mesh: &SphereMesh) -> Result<(), GpuError> {
+    let loc = mesh.locator();
+    let key = (mesh.len(), mesh.triangles.len(), loc.cell_count());
+    if ctx.locate.mesh.as_ref().is_some_and(|m| m.key == key) {
+        return Ok(());
+    }
+    ctx.locate.mesh = None;
+    let limit = ctx.device.limits().max_storage_buffer_binding_size;
+    let positions: Vec<f32> = mesh
+        .positions
+        .iter()
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect();
+    let triangles: &[u32] = bytemuck::cast_slice(&mesh.triangles);
+    let mut cells: Vec<u32> =
+        Vec::with_capacity(loc.cell_starts().len() + loc.cell_triangle_list().len());
+    cells.extend_from_slice(loc.cell_starts());
+    cells.extend_from_slice(loc.cell_triangle_list());
+    too_large("the positions", 4 * positions.len(), limit)?;
+    too_large("the triangles", 4 * triangles.len(), limit)?;
+    too_large("the locator cells", 4 * cells.len(), limit)?;
+    let b = MeshBuffers {
+        key,
+        positions: ctx.storage_buffer("locate positions", 4 * positions.len()),
+        triangles: ctx.storage_buffer("locate triangles", 4 * triangles.len()),
+        cells: ctx.storage_buffer("locate cells", 4 * cells.len()),
+        cell_count: loc.cell_count() as u32,
+        grid: loc.grid() as u32,
+    };
+    ctx.upload(&b.positions, bytemuck::cast_slice(&positions));
+    ctx.upload(&b.triangles, bytemuck::cast_slice(triangles));
+    ctx.upload(&b.cells, bytemuck::cast_slice(&cells));
+    ctx.check("resample_locate mesh upload")?;
+    ctx.locate.mesh = Some(b);
+    Ok(())
+}
+
+fn plate_words(table: &PlateTable) -> Vec<GpuPlate> {
+    table
+        .by_rank
+        .iter()
+        .map(|&slot| {
+            let p = &table.plates[slot as usize];
+            let m = p.plate_from_world;
+            let row = |i: usize| DVec3::new(m.x_axis[i], m.y_axis[i], m.z_axis[i]);
+            let (r0, r1, r2, c) = (row(0), row(1), row(2), p.centroid_world);
+            GpuPlate {
+                rows_centroid: [
+                    r0.x, r0.y, r0.z, c.x, r1.x, r1.y, r1.z, c.y, r2.x, r2.y, r2.z, c.z,
+                ]
+                .map(|x| x as f32),
+                cap_cos: p.cap_cos as f32,
+                id: p.id,
+                slot,
+                _pad: 0,
+            }
+        })
+        .collect()
+}
+
+/// Runs the kernel and reads its output back: per sample, the source as the kernel found it
+/// (gaps as [`SampleSource`] gaps), and the samples the kernel left to the CPU (their sources
+/// are gaps here). [`resample_locate_gpu`] then locates those on the CPU.
+pub fn resample_locate_raw(
+    ctx: &mut GpuContext,
+    mesh: &SphereMesh,
+    old: &Crust,
+    table: &PlateTable,
+    rules: &OverlapRules,
+    cell_plates: &CellPlates,
+) -> Result<(Vec<SampleSource>, Vec<u32>), GpuError> {
+    let n = mesh.len();
+    if old.len() != n || cell_plates.lists().len() != mesh.locator().cell_count() {
+        return Err(GpuError::Kernel {
+            kernel: "resample_locate",
+            message: format!(
+                "inputs of different sizes: mesh {n}, crust {}, cell lists {}",
+                old.len(),
+                cell_plates.lists().len()
+            ),
+        });
+    }
+    if rules.suture_of_sample.len() > n {
+        return Err(GpuError::Kernel {
+            kernel: "resample_locate",
+            message: "more sutured samples than samples".into(),
+        });
+    }
+    ensure_mesh(ctx, mesh)?;
+    // The auxiliary buffer: plates, pairs, suture targets, cell lists.
+    let plates = plate_words(table);
+    let mut aux: Vec<u32> = bytemuck::cast_slice(&plates).to_vec();
+    let pairs_at = aux.len() as u32;
+    for &(a, b) in rules.pairs {
+        aux.extend_from_slice(&[a, b]);
+    }
+    let targets_at = aux.len() as u32;
+    aux.extend_from_slice(rules.suture_target);
+    let cells_at = aux.len() as u32;
+    aux.extend_from_slice(bytemuck::cast_slice(cell_plates.lists()));
+    let limit = ctx.device.limits().max_storage_buffer_binding_size;
+    too_large("the plate table and cell lists", 4 * aux.len(), limit)?;
+    too_large("the output", 32 * n, limit)?;
+    let aux_buf = ctx.storage_buffer("locate aux", 4 * aux.len());
+    ctx.upload(&aux_buf, bytemuck::cast_slice(&aux));
+    let plate_buf = ctx.storage_buffer("locate old plate", 4 * n);
+    ctx.upload(&plate_buf, bytemuck::cast_slice(&old.plate));
+    let type_buf = ctx.storage_buffer("locate crust type", n);
+    ctx.upload(&type_buf, bytemuck::cast_slice(&old.crust_type));
+    let suture_buf = ctx.storage_buffer("locate sutures", 4 * rules.suture_of_sample.len());
+    ctx.upload(&suture_buf, bytemuck::cast_slice(rules.suture_of_sample));
+    let out_buf = ctx.storage_buffer("locate output", 32 * n);
+    let Some(m) = ctx.locate.mesh.as_ref() else {
+        return Err(GpuError::Kernel {
+            kernel: "resample_locate",
+            message: "the mesh is not on the device".into(),
+        });
+    };
+    let u = LocateUniforms {
+        count: n as u32,
+        row_stride: ROW_STRIDE,
+        plate_count: plates.len() as u32,
+        pair_count: rules.pairs.len() as u32,
+        suture_len: rules.suture_of_sample.len() as u32,
+        grid: m.grid,
+        cell_count: m.cell_count,
+        pairs_at,
+        targets_at,
+        cells_at,
+        doubt_w: doubt_margin(mesh.mean_spacing_rad()),
+        doubt_cell: 1e-3,
+    };
+    let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("resample_locate bindings"),
+        layout: &ctx.locate.pipeline.get_bind_group_layout(0),
+        entries: &[
+            entry(0, &ctx.locate.uniforms),
+            entry(1, &m.positions),
+            entry(2, &m.triangles),
+            entry(3, &m.cells),
+            entry(4, &aux_buf),
+            entry(5, &plate_buf),
+            entry(6, &type_buf),
+            entry(7, &suture_buf),
+            entry(8, &out_buf),
+        ],
+    });
+    let (pipeline, uniforms) = (ctx.locate.pipeline.clone(), ctx.locate.uniforms.clone());
+    ctx.upload(&uniforms, bytemuck::bytes_of(&u));
+    ctx.dispatch("resample_locate", &pipeline, &bind_group, n as u32)?;
+    let mut words = vec![[u32::MAX; 8]; n];
+    ctx.download(
+        "resample_locate",
+        &out_buf,
+        bytemuck::cast_slice_mut(&mut words),
+    )?;
+    let doubtful: Vec<u32> = words
+        .iter()
+        .enumerate()
+        .filter(|(_, w)| w[3] & FLAG_DOUBT != 0)
+        .map(|(j, _)| j as u32)
+        .collect();
+    let sources = words
+        .par_iter()
+        .with_min_len(4096)
+        .map(|w| {
+            if w[0] == u32::MAX {
+                SampleSource {
+                    slot: u32::MAX,
+                    plate: NO_PLATE,
+                    suture: u32::MAX,
+                    continental_lost: false,
+                    triangle: 0,
+                    weights: [0.0; 3],
+                }
+            } else {
+                SampleSource {
+                    slot: w[0],
+                    plate: w[1],
+                    suture: w[2],
+                    continental_lost: w[3] & FLAG_CONTINENTAL_LOST != 0,
+                    triangle: w[4],
+                    weights: [
+                        f32::from_bits(w[5]),
+                        f32::from_bits(w[6]),
+                        f32::from_bits(w[7]),
+                    ],
+                }
+            }
+        })
+        .collect();
+    Ok((sources, doubtful))
+}
+
+/// The GPU counterpart of [`resample_locate_cpu`]: locates every sample on the device, then the
+/// samples the kernel left to the CPU with [`locate_one`]. Same outputs as the CPU except the
+/// weights (f32 geometry, see the module documentation).
+pub fn resample_locate_gpu(
+    ctx: &mut GpuContext,
+    mesh: &SphereMesh,
+    old: &Crust,
+    table: &PlateTable,
+    rules: &OverlapRules,
+    sources: &mut Vec<SampleSource>,
+) -> Result<LocateReport, GpuError> {
+    let cell_plates = CellPlates::build(mesh, old, table);
+    let (located, doubtful) = resample_locate_raw(ctx, mesh, old, table, rules, &cell_plates)?;
+    *sources = located;
+    let redone: Vec<SampleSource> = doubtful
+        .par_iter()
+        .with_min_len(256)
+        .map(|&j| {
+            locate_one(
+                mesh,
+                old,
+                table,
+                &cell_plates,
+                rules,
+                mesh.positions[j as usize],
+            )
+        })
+        .collect();
+    for (&j, s) in doubtful.iter().zip(redone) {
+        sources[j as usize] = s;
+    }
+    ctx.traffic.locations += 1;
+    ctx.traffic.rechecked_samples += doubtful.len() as u64;
+    Ok(LocateReport {
+        rechecked: doubtful.len(),
+        gaps: sources.iter().filter(|s| s.is_gap()).count(),
+    })
+}

@@ -466,21 +466,30 @@ pub fn displace_overridden_continents(
     for (plate, starts) in by_plate {
         lost += starts.len();
         // First within the plate; what a plate without enough ocean of its own (a continental
-        // fragment fresh from a rift) cannot take spills onto the neighbouring plates' ocean,
-        // which keeps its plate.
+        // fragment fresh from a rift, or a plate that is all continent) cannot take, it takes
+        // from the neighbouring plates' ocean next to it, which joins the plate: the continent
+        // grows outward over the adjacent ocean floor.
         let debt = spread_continent(
             mesh,
             next,
             &starts,
             starts.len(),
-            Some(plate),
+            Spread::Within(plate),
             &mut visited,
             thickness,
         );
         moved += starts.len() - debt;
         if debt > 0 {
             visited.iter_mut().for_each(|v| *v = false);
-            let left = spread_continent(mesh, next, &starts, debt, None, &mut visited, thickness);
+            let left = spread_continent(
+                mesh,
+                next,
+                &starts,
+                debt,
+                Spread::Claim(plate),
+                &mut visited,
+                thickness,
+            );
             spilled += debt - left;
             moved += debt - left;
         }
@@ -494,18 +503,30 @@ pub fn displace_overridden_continents(
     );
 }
 
+/// Where [`spread_continent`] may turn ocean into continent.
+#[derive(Clone, Copy)]
+enum Spread {
+    /// Only through and into this plate's samples.
+    Within(u32),
+    /// Through any plate; the samples it turns join this plate.
+    Claim(u32),
+}
+
 /// Breadth-first from `starts`, turns up to `debt` oceanic samples next to continental ones into
-/// continental crust with the elevation and orogeny of that neighbour; with `plate`, only through
-/// and into that plate's samples. Returns the debt left.
+/// continental crust with the elevation and orogeny of that neighbour. Returns the debt left.
 fn spread_continent(
     mesh: &SphereMesh,
     next: &mut Crust,
     starts: &[u32],
     mut debt: usize,
-    plate: Option<u32>,
+    spread: Spread,
     visited: &mut [bool],
     thickness: f32,
 ) -> usize {
+    let plate = match spread {
+        Spread::Within(p) => Some(p),
+        Spread::Claim(_) => None,
+    };
     let mut queue: std::collections::VecDeque<u32> = starts.iter().copied().collect();
     for &s in starts {
         visited[s as usize] = true;
@@ -532,6 +553,9 @@ fn spread_continent(
                 next.orogeny[v] = next.orogeny[u];
                 next.orogeny_age_my[v] = next.orogeny_age_my[u];
                 next.fold_dir[v] = next.fold_dir[u];
+                if let Spread::Claim(p) = spread {
+                    next.plate[v] = p;
+                }
                 debt -= 1;
             }
             queue.push_back(v as u32);

@@ -18,6 +18,7 @@
 //! [`GpuTraffic`] counts the bytes both ways; `planet bench --backend gpu` prints them per step.
 
 pub mod aging;
+pub mod amplify;
 pub mod erosion;
 pub mod subduction_uplift;
 

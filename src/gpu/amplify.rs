@@ -41,7 +41,7 @@ pub struct AmplifyGpu {
 /// The largest number of queries one dispatch can take on `device`, at most `limit`.
 fn chunk_for(device: &wgpu::Device, limit: usize) -> usize {
     let l = device.limits();
-    let binding = (l.max_storage_buffer_binding_size as u64).min(l.max_buffer_size) as usize;
+    let binding = l.max_storage_buffer_binding_size.min(l.max_buffer_size) as usize;
     let groups = l.max_compute_workgroups_per_dimension as usize * AMPLIFY_WORKGROUP_SIZE as usize;
     limit
         .min(groups)
@@ -70,8 +70,9 @@ impl AmplifyGpu {
     ) -> Result<Self, GpuError> {
         let vsize = std::mem::size_of_val(vertices);
         let limits = ctx.device.limits();
-        let max_binding =
-            (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
+        let max_binding = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
         if vsize as u64 > max_binding {
             return Err(GpuError::TooLarge(format!(
                 "the amplification table ({} samples, {vsize} bytes) exceeds the adapter's \

@@ -104,6 +104,10 @@ struct ExportArgs {
     /// Skip the standard maps and summary (write only the exports asked for below).
     #[arg(long)]
     no_maps: bool,
+    /// Compute backend of the amplified export: auto (a hardware GPU if any, else the CPU), gpu
+    /// (any wgpu adapter, software ones included), cpu (bit-reproducible everywhere).
+    #[arg(long, default_value = "auto")]
+    backend: BackendChoice,
     #[command(flatten)]
     extra: ExtraExports,
 }
@@ -698,6 +702,9 @@ fn export(a: ExportArgs) -> Result<()> {
     check_width(a.width)?;
     let started = Instant::now();
     let mut sim = save::load_from_file(&a.file)?;
+    if a.extra.amplified {
+        use_backend(&mut sim, a.backend)?;
+    }
     let mut files = if a.no_maps {
         prepare_out_dir(&a.out)?;
         Vec::new()
@@ -713,9 +720,28 @@ fn export(a: ExportArgs) -> Result<()> {
     Ok(())
 }
 
-/// Writes the opt-in exports of `e` into `out`; returns the files written.
+/// Writes the opt-in exports of `e` into `out`; returns the files written. On the GPU backend
+/// the amplified heightmap is amplified on the device (procedural relief only).
 fn write_extra_exports(
     sim: &mut Simulation,
+    out: &Path,
+    width: u32,
+    e: &ExtraExports,
+    quiet: bool,
+) -> Result<Vec<PathBuf>> {
+    // The context leaves the world while the mesh is borrowed, and goes back afterwards.
+    let mut gpu = sim.world_mut().remove_resource::<GpuContext>();
+    let r = write_extra_exports_on(sim, gpu.as_mut(), out, width, e, quiet);
+    if let Some(ctx) = gpu {
+        sim.world_mut().insert_resource(ctx);
+    }
+    r
+}
+
+/// [`write_extra_exports`] with the GPU context, if any.
+fn write_extra_exports_on(
+    sim: &mut Simulation,
+    gpu: Option<&mut GpuContext>,
     out: &Path,
     width: u32,
     e: &ExtraExports,
@@ -788,8 +814,16 @@ fn write_extra_exports(
                 .geotiff
                 .then(|| out.join(format!("{prefix}amplified.tif"))),
         };
-        files.extend(export::export_amplified(&amp, &grid, &outputs)?);
-        say(&format!("amplified {}x{}", grid.width, grid.height), t);
+        let on = match (&gpu, &amp.exemplars) {
+            (Some(ctx), None) => format!("gpu: {}", ctx.adapter.name),
+            (Some(_), Some(_)) => "cpu: the GPU kernel has no exemplars".to_string(),
+            (None, _) => "cpu".to_string(),
+        };
+        files.extend(export::export_amplified_on(&amp, &grid, &outputs, gpu)?);
+        say(
+            &format!("amplified {}x{} ({on})", grid.width, grid.height),
+            t,
+        );
     }
     if e.preview {
         let t = Instant::now();

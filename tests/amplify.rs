@@ -1,6 +1,7 @@
 //! Amplification (paper §5): determinism, seamless tiles, agreement with the global map,
-//! anisotropy along fold and ridge directions, age effects, exemplars, and the WGSL kernel's
-//! validity and layout.
+//! anisotropy along fold and ridge directions, age effects, exemplars, the WGSL kernel's
+//! validity and layout, and the kernel against its CPU reference on a GPU adapter (lavapipe on
+//! CI; skipped with a message without one, except with `CI=true`, where that fails).
 
 use glam::DVec3;
 use tectonic_planets::amplify::exemplar::{Exemplar, synthetic_exemplar};
@@ -9,8 +10,11 @@ use tectonic_planets::amplify::{
     TerrainType, amplify_cpu, amplify_point,
 };
 use tectonic_planets::geometry::{SphereMesh, from_lat_lon_deg};
+use tectonic_planets::gpu::amplify::{AmplifyGpu, amplify_gpu};
+use tectonic_planets::gpu::{BackendChoice, GpuContext, select_backend};
 use tectonic_planets::io::export::GeoGrid;
 use tectonic_planets::prelude::*;
+use tectonic_planets::random::SimRng;
 
 const RADIUS_KM: f64 = 6371.0;
 
@@ -472,4 +476,173 @@ fn amplify_shader_validates_and_matches_the_rust_layout() {
     ] {
         assert!(src.contains(c), "shader lacks `{c}`");
     }
+}
+
+/// An adapter (lavapipe on CI), or None with a message when there is none outside CI (where a
+/// missing adapter is a failure), as in tests/gpu.rs.
+fn gpu_or_skip(test: &str) -> Option<GpuContext> {
+    match select_backend(BackendChoice::Gpu) {
+        Ok(s) => s.context,
+        Err(e) => {
+            if std::env::var("CI").is_ok_and(|v| v == "true") {
+                panic!("{test}: no GPU adapter on CI (is mesa-vulkan-drivers installed?): {e}");
+            }
+            eprintln!("{test}: SKIPPED, no GPU adapter: {e}");
+            None
+        }
+    }
+}
+
+/// A fresh seed each run (from the clock), or `AMPLIFY_TEST_SEED` to replay one.
+fn fresh_seed() -> u64 {
+    if let Some(s) = std::env::var("AMPLIFY_TEST_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+    {
+        return s;
+    }
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(1)
+}
+
+/// A random crust on `mesh`: elevations from −8 to +6 km, half continental, a third of it in
+/// each orogeny (none, Andean, Himalayan), random ages, fold and ridge directions.
+fn random_crust(mesh: &SphereMesh, rng: &mut SimRng) -> Crust {
+    let mut c = Crust::with_len(mesh.len());
+    let v = |rng: &mut SimRng| {
+        [
+            (rng.next_f64() - 0.5) as f32,
+            (rng.next_f64() - 0.5) as f32,
+            (rng.next_f64() - 0.5) as f32,
+        ]
+    };
+    for i in 0..mesh.len() {
+        c.elevation_km[i] = (rng.next_f64() * 14.0 - 8.0) as f32;
+        c.crust_type[i] = if rng.next_f64() < 0.5 {
+            CrustType::Continental
+        } else {
+            CrustType::Oceanic
+        };
+        c.age_my[i] = (rng.next_f64() * 300.0) as f32;
+        c.orogeny[i] = match (rng.next_f64() * 3.0) as u32 {
+            0 => Orogeny::None,
+            1 => Orogeny::Andean,
+            _ => Orogeny::Himalayan,
+        };
+        c.orogeny_age_my[i] = (rng.next_f64() * 300.0) as f32;
+        c.fold_dir[i] = v(rng);
+        c.ridge_dir[i] = v(rng);
+    }
+    c
+}
+
+/// Tolerance of the GPU amplification against `amplify_cpu`, per value (docs/amplification.md):
+/// 5 cm. Both sides compute in f32 with the same operations; what differs is the rounding of
+/// `exp` and of fused multiply-adds, a few ulps (lavapipe: at most 1 ulp of the result, 0.5 mm
+/// at 4 km), so 5 cm leaves room for hardware GPUs while a wrong constant or operation in the
+/// shader (metres) fails.
+const AMPLIFY_TOLERANCE_M: f32 = 0.05;
+
+/// Queries, not a multiple of the workgroup size nor of the chunk, so the tails are exercised.
+const GPU_QUERIES: usize = 100_003;
+
+#[test]
+fn amplify_kernel_matches_cpu_reference() {
+    let Some(mut ctx) = gpu_or_skip("amplify") else {
+        return;
+    };
+    let seed = fresh_seed();
+    eprintln!("amplify_kernel_matches_cpu_reference: seed {seed} (AMPLIFY_TEST_SEED to replay)");
+    let mut rng = SimRng::new(seed, 1);
+    let mesh = SphereMesh::fibonacci(20_000, 0.5, seed, RADIUS_KM).unwrap();
+    let crust = random_crust(&mesh, &mut rng);
+    let options = AmplifyOptions {
+        relief_scale: (0.5 + rng.next_f64() * 1.5) as f32,
+        ..Default::default()
+    };
+    let amp = Amplifier::new(&mesh, &crust, seed, options);
+    // Random points: half anywhere, half in a 200 km cap (points 100 m apart and closer).
+    let centre = from_lat_lon_deg(
+        rng.next_f64() * 120.0 - 60.0,
+        rng.next_f64() * 360.0 - 180.0,
+    );
+    let queries: Vec<AmplifyQuery> = (0..GPU_QUERIES)
+        .map(|i| {
+            let r = DVec3::new(
+                rng.next_f64() - 0.5,
+                rng.next_f64() - 0.5,
+                rng.next_f64() - 0.5,
+            );
+            let d = if i % 2 == 0 {
+                r.normalize()
+            } else {
+                (centre + r * (200.0 / RADIUS_KM)).normalize()
+            };
+            amp.query(d)
+        })
+        .collect();
+    let u = AmplifyUniform {
+        count: queries.len() as u32,
+        ..amp.uniform
+    };
+    let mut cpu = vec![f32::NAN; queries.len()];
+    amplify_cpu(&u, &amp.vertices, &queries, &mut cpu);
+
+    // Small chunks (several dispatches, a short last one) into a NaN-poisoned output, then the
+    // one-call form with the default chunk.
+    let kernel = AmplifyGpu::with_chunk_limit(&mut ctx, &amp.vertices, &u, 30_000).unwrap();
+    assert!(kernel.chunk_len() <= 30_000);
+    let mut chunked = vec![f32::NAN; queries.len()];
+    kernel.run(&mut ctx, &queries, &mut chunked).unwrap();
+    let whole = amplify_gpu(&mut ctx, &amp.vertices, &queries, &u).unwrap();
+
+    for (name, gpu) in [("chunked", &chunked), ("amplify_gpu", &whole)] {
+        let (mut max_abs, mut max_rel, mut worst, mut differ) = (0.0f32, 0.0f32, 0, 0);
+        for (i, (&g, &c)) in gpu.iter().zip(&cpu).enumerate() {
+            assert!(
+                g.is_finite(),
+                "{name}: query {i} not written or not finite: {g} (seed {seed})"
+            );
+            let e = (g - c).abs();
+            if e > max_abs {
+                (max_abs, worst) = (e, i);
+            }
+            max_rel = max_rel.max(e / c.abs().max(1.0));
+            differ += usize::from(g.to_bits() != c.to_bits());
+            assert!(
+                e <= AMPLIFY_TOLERANCE_M,
+                "{name}: query {i}: gpu {g} m, cpu {c} m, error {e} m (seed {seed})"
+            );
+        }
+        eprintln!(
+            "amplify {name}: max error {max_abs} m (query {worst}, cpu {} m), max relative \
+             {max_rel:e}, {differ} of {} values not bit-identical",
+            cpu[worst],
+            cpu.len()
+        );
+    }
+    // The relief is really there (not the crust elevation alone on both sides).
+    let flat: Vec<f32> = queries
+        .iter()
+        .map(|q| {
+            let v = &amp.vertices;
+            q.w0 * v[q.c0 as usize].elevation_m
+                + q.w1 * v[q.c1 as usize].elevation_m
+                + q.w2 * v[q.c2 as usize].elevation_m
+        })
+        .collect();
+    let moved = cpu
+        .iter()
+        .zip(&flat)
+        .filter(|(a, b)| (*a - *b).abs() > 5.0)
+        .count();
+    assert!(moved > queries.len() / 2, "only {moved} points have relief");
+    // Empty inputs.
+    assert!(
+        amplify_gpu(&mut ctx, &amp.vertices, &[], &u)
+            .unwrap()
+            .is_empty()
+    );
 }

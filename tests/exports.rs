@@ -380,3 +380,70 @@ fn export_command_writes_the_requested_files_and_refuses_bad_flags() {
     }
     std::fs::remove_dir_all(&out).ok();
 }
+
+#[test]
+fn export_backend_gpu_amplifies_within_the_tolerance_of_the_cpu() {
+    let save = Path::new(env!("CARGO_MANIFEST_DIR")).join("saves/fixture-v1.planet");
+    let run = |backend: &str| {
+        let out = temp_dir(&format!("backend-{backend}"));
+        let o = planet()
+            .arg("export")
+            .arg(&save)
+            .args(["--no-maps", "--amplified", "--geotiff"])
+            .args(["--amplified-width", "512", "--backend", backend])
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        (o, out)
+    };
+    let (cpu, cpu_dir) = run("cpu");
+    assert!(
+        cpu.status.success(),
+        "{}",
+        String::from_utf8_lossy(&cpu.stderr)
+    );
+    let (gpu, gpu_dir) = run("gpu");
+    let err = String::from_utf8_lossy(&gpu.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    if !gpu.status.success() {
+        // Without an adapter: a clear error (a failure on CI, where lavapipe is installed).
+        assert!(err.contains("no GPU adapter"), "{err}");
+        assert!(
+            !std::env::var("CI").is_ok_and(|v| v == "true"),
+            "no GPU adapter on CI: {err}"
+        );
+        eprintln!("export --backend gpu: SKIPPED, no GPU adapter");
+        return;
+    }
+    assert!(
+        err.contains("(gpu: "),
+        "the rows were not amplified on the GPU: {err}"
+    );
+    let read = |dir: &Path| {
+        tectonic_planets::io::geotiff::read_single_band(
+            &std::fs::read(dir.join("amplified.tif")).unwrap(),
+        )
+        .unwrap()
+        .values
+    };
+    let (c, g) = (read(&cpu_dir), read(&gpu_dir));
+    assert_eq!(c.len(), 512 * 256);
+    assert_eq!(c.len(), g.len());
+    let max = c
+        .iter()
+        .zip(&g)
+        .map(|(a, b)| (a - b).abs())
+        .fold(
+            0.0f32,
+            |m, e| if e.is_nan() { f32::INFINITY } else { m.max(e) },
+        );
+    // The kernel's tolerance (docs/amplification.md, tests/amplify.rs).
+    assert!(
+        max <= 0.05,
+        "gpu export differs from the cpu one by {max} m"
+    );
+    eprintln!("export --backend gpu: max difference {max} m");
+    std::fs::remove_dir_all(&cpu_dir).ok();
+    std::fs::remove_dir_all(&gpu_dir).ok();
+}

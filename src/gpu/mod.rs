@@ -21,6 +21,7 @@
 //! [`GpuTraffic`] counts the bytes both ways; `planet bench --backend gpu` prints them per step.
 
 pub mod aging;
+pub mod amplify;
 pub mod erosion;
 pub mod resample_locate;
 pub mod subduction_uplift;

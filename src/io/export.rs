@@ -15,6 +15,8 @@ use rayon::prelude::*;
 
 use crate::amplify::Amplifier;
 use crate::geometry::SphereMesh;
+use crate::gpu::GpuContext;
+use crate::gpu::amplify::AmplifyGpu;
 use crate::io::geotiff::{GeoBounds, GeoTiffError, GeoTiffWriter};
 use crate::io::heightmap::{Heightmap16Writer, HeightmapError};
 use crate::resources::{Crust, Orogeny};
@@ -36,6 +38,9 @@ pub enum ExportError {
     /// Writing a heightmap failed.
     #[error(transparent)]
     Heightmap(#[from] HeightmapError),
+    /// The GPU amplification failed.
+    #[error(transparent)]
+    Gpu(#[from] crate::gpu::GpuError),
     /// Writing a preview image failed.
     #[error("could not write {}: {reason}", path.display())]
     Image {
@@ -290,6 +295,26 @@ pub fn export_amplified(
     grid: &GeoGrid,
     outputs: &ElevationOutputs,
 ) -> Result<Vec<PathBuf>, ExportError> {
+    export_amplified_on(amp, grid, outputs, None)
+}
+
+/// [`export_amplified`], amplifying each band on the GPU when `gpu` is given (the kernel of
+/// `shaders/amplify.wgsl`; point location stays on the CPU). The values then differ from the
+/// CPU's within the tolerance of docs/amplification.md. Without `gpu`, or with exemplars (the
+/// shader has none), the bands are computed on the CPU: the same bits as [`export_amplified`].
+pub fn export_amplified_on(
+    amp: &Amplifier,
+    grid: &GeoGrid,
+    outputs: &ElevationOutputs,
+    gpu: Option<&mut GpuContext>,
+) -> Result<Vec<PathBuf>, ExportError> {
+    let mut device = match gpu {
+        Some(ctx) if amp.exemplars.is_none() => {
+            let kernel = AmplifyGpu::new(ctx, &amp.vertices, &amp.uniform)?;
+            Some((kernel, ctx))
+        }
+        _ => None,
+    };
     let bounds = grid.bounds();
     let (lo, hi) = amp.range_m();
     let mut png = match &outputs.png16 {
@@ -313,11 +338,21 @@ pub fn export_amplified(
         None => None,
     };
     let mut band = Vec::new();
+    let mut queries = Vec::new();
     let mut row0 = 0;
     let f = |d: DVec3, hint: &mut u32| amp.elevation_m_hinted(d, hint);
+    let locate = |d: DVec3, hint: &mut u32| amp.query_hinted(d, hint);
     while row0 < grid.height {
         let rows = BAND_ROWS.min(grid.height - row0);
-        grid.band_hinted(row0, rows, &f, &mut band);
+        match device.as_mut() {
+            Some((kernel, ctx)) => {
+                grid.band_hinted(row0, rows, &locate, &mut queries);
+                band.clear();
+                band.resize(queries.len(), f32::NAN);
+                kernel.run(ctx, &queries, &mut band)?;
+            }
+            None => grid.band_hinted(row0, rows, &f, &mut band),
+        }
         for row in band.chunks(grid.width as usize) {
             if let Some(w) = png.as_mut() {
                 w.write_row(row)?;

@@ -65,6 +65,9 @@ struct ViewArgs {
     /// Window width and height in pixels.
     #[arg(long, value_name = "WxH", default_value = "1280x800")]
     window: String,
+    /// Start in the 3D globe view (instead of the 2D map).
+    #[arg(long)]
+    globe: bool,
 }
 
 /// Where and how often to save.
@@ -680,6 +683,7 @@ fn view(a: ViewArgs) -> Result<()> {
         window_size: [w as f32, h as f32],
         exit_after_steps: a.exit_after_steps,
         screenshot: a.screenshot.clone(),
+        globe: a.globe,
     };
     let report = tectonic_planets::viewer::run(build, opts)?;
     if a.exit_after_steps.is_some() {

@@ -50,6 +50,8 @@ pub struct ViewerOptions {
     pub exit_after_steps: Option<u64>,
     /// Write a screenshot here before exiting (with `exit_after_steps`).
     pub screenshot: Option<PathBuf>,
+    /// Start in the 3D globe view.
+    pub globe: bool,
 }
 
 impl Default for ViewerOptions {
@@ -58,6 +60,7 @@ impl Default for ViewerOptions {
             window_size: [1280.0, 800.0],
             exit_after_steps: None,
             screenshot: None,
+            globe: false,
         }
     }
 }
@@ -114,6 +117,7 @@ pub fn run(
                 None => tracing::warn!("no wgpu render state: the 3D globe is off"),
             }
             app.exit_error = err2;
+            app.view3d = opts.globe;
             if let Some(n) = opts.exit_after_steps {
                 app = app.with_exit_plan(ExitPlan::new(n, opts.screenshot.clone()));
             }

@@ -68,6 +68,16 @@ struct ViewArgs {
     /// Start in the 3D globe view (instead of the 2D map).
     #[arg(long)]
     globe: bool,
+    /// Steps per second while running (default: as fast as possible).
+    #[arg(long, value_name = "STEPS")]
+    speed: Option<f64>,
+    /// Map colouring at start: elevation, plates, crust_type, oceanic_age, orogeny_type,
+    /// orogeny_age, laplacian.
+    #[arg(long, default_value = "elevation")]
+    overlay: String,
+    /// Vector layers drawn at start, comma-separated: folds, ridges, velocity, fronts, terranes.
+    #[arg(long, value_delimiter = ',')]
+    draw: Vec<String>,
 }
 
 /// Where and how often to save.
@@ -650,7 +660,10 @@ fn view(a: ViewArgs) -> Result<()> {
     let source = match &a.file {
         Some(path) => {
             if !path.is_file() {
-                bail!("save file {} does not exist or is not a file", path.display());
+                bail!(
+                    "save file {} does not exist or is not a file",
+                    path.display()
+                );
             }
             Err(path.clone())
         }
@@ -671,12 +684,14 @@ fn view(a: ViewArgs) -> Result<()> {
                 let mut sim = Simulation::new(params).map_err(|e| e.to_string())?;
                 if let Some(path) = &planet.config {
                     let config = PluginConfig::load(path).map_err(|e| e.to_string())?;
-                    sim.apply_plugin_config(&config).map_err(|e| e.to_string())?;
+                    sim.apply_plugin_config(&config)
+                        .map_err(|e| e.to_string())?;
                 }
                 sim
             }
         };
-        apply_switches(&mut sim, &switches.enable, &switches.disable).map_err(|e| format!("{e:#}"))?;
+        apply_switches(&mut sim, &switches.enable, &switches.disable)
+            .map_err(|e| format!("{e:#}"))?;
         Ok(sim)
     };
     let opts = tectonic_planets::viewer::ViewerOptions {
@@ -684,6 +699,16 @@ fn view(a: ViewArgs) -> Result<()> {
         exit_after_steps: a.exit_after_steps,
         screenshot: a.screenshot.clone(),
         globe: a.globe,
+        steps_per_second: match a.speed {
+            Some(s) if !s.is_finite() || s <= 0.0 => {
+                bail!("--speed must be a positive number of steps per second, got {s}")
+            }
+            Some(s) => s,
+            None => 0.0,
+        },
+        base: a.overlay.parse().map_err(anyhow::Error::msg)?,
+        layers: tectonic_planets::viewer::map::VectorLayers::from_names(&a.draw)
+            .map_err(anyhow::Error::msg)?,
     };
     let report = tectonic_planets::viewer::run(build, opts)?;
     if a.exit_after_steps.is_some() {

@@ -63,7 +63,9 @@ fn view_steps_writes_a_screenshot_and_exits_under_xvfb() {
         if std::env::var("CI").is_ok_and(|v| v == "true") {
             panic!("xvfb-run is missing on CI: install the `xvfb` package (.ci/run does)");
         }
-        eprintln!("SKIPPED: xvfb-run is not installed (apt-get install xvfb); the viewer smoke test did not run");
+        eprintln!(
+            "SKIPPED: xvfb-run is not installed (apt-get install xvfb); the viewer smoke test did not run"
+        );
         return;
     }
     let dir = temp_dir("smoke");
@@ -84,7 +86,12 @@ fn view_steps_writes_a_screenshot_and_exits_under_xvfb() {
     let img = image::open(&shot)
         .unwrap_or_else(|e| panic!("no readable screenshot at {}: {e}\n{out}", shot.display()))
         .to_rgb8();
-    assert!(img.width() >= 640 && img.height() >= 400, "{}x{}", img.width(), img.height());
+    assert!(
+        img.width() >= 640 && img.height() >= 400,
+        "{}x{}",
+        img.width(),
+        img.height()
+    );
     // Not blank: many distinct colours, and the map's ocean blues and land greens are there.
     let mut colours = std::collections::HashSet::new();
     let (mut blue, mut green) = (0usize, 0usize);
@@ -99,15 +106,33 @@ fn view_steps_writes_a_screenshot_and_exits_under_xvfb() {
         }
     }
     let n = (img.width() * img.height()) as usize;
-    assert!(colours.len() > 500, "only {} colours: blank screenshot?", colours.len());
-    assert!(blue > n / 20, "almost no ocean in the screenshot ({blue} of {n} pixels)");
-    assert!(green > n / 200, "almost no land in the screenshot ({green} of {n} pixels)");
+    assert!(
+        colours.len() > 500,
+        "only {} colours: blank screenshot?",
+        colours.len()
+    );
+    assert!(
+        blue > n / 20,
+        "almost no ocean in the screenshot ({blue} of {n} pixels)"
+    );
+    assert!(
+        green > n / 200,
+        "almost no land in the screenshot ({green} of {n} pixels)"
+    );
 }
 
 #[test]
 fn view_without_a_display_fails_with_a_clear_message() {
     let out = Command::new(env!("CARGO_BIN_EXE_planet"))
-        .args(["view", "--samples", "2000", "--plates", "4", "--exit-after-steps", "1"])
+        .args([
+            "view",
+            "--samples",
+            "2000",
+            "--plates",
+            "4",
+            "--exit-after-steps",
+            "1",
+        ])
         .env_remove("DISPLAY")
         .env_remove("WAYLAND_DISPLAY")
         .output()

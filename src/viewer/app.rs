@@ -169,6 +169,49 @@ pub struct ViewerApp {
     pub globe_ready: bool,
     map_generation: u64,
     map_elevation: Arc<Vec<f32>>,
+    painter: Option<MapPainter>,
+}
+
+/// A map to colour: a snapshot and a base layer (and the elevation grid for the globe).
+struct PaintJob {
+    key: (usize, BaseLayer),
+    snap: Arc<Snapshot>,
+    layer: BaseLayer,
+    elevation: bool,
+}
+
+/// A coloured map.
+struct Painted {
+    key: (usize, BaseLayer),
+    image: Arc<ColorImage>,
+    elevation_km: Option<Arc<Vec<f32>>>,
+}
+
+fn paint_job(job: PaintJob) -> Painted {
+    let s = &job.snap;
+    let image = Arc::new(map::render_base(s, job.layer));
+    let elevation_km = job.elevation.then(|| {
+        use rayon::prelude::*;
+        let lk = &s.lookup;
+        Arc::new(
+            (0..lk.corners.len())
+                .into_par_iter()
+                .map(|i| lk.lerp(&s.crust.elevation_km, i))
+                .collect(),
+        )
+    });
+    Painted {
+        key: job.key,
+        image,
+        elevation_km,
+    }
+}
+
+/// The map painter thread's ends.
+struct MapPainter {
+    tx: std::sync::mpsc::Sender<PaintJob>,
+    rx: std::sync::mpsc::Receiver<Painted>,
+    busy: bool,
 }
 
 impl ViewerApp {
@@ -206,6 +249,7 @@ impl ViewerApp {
             globe_ready: false,
             map_generation: 0,
             map_elevation: Arc::default(),
+            painter: None,
         }
     }
 
@@ -261,13 +305,11 @@ impl ViewerApp {
         egui::Panel::left("schedule")
             .default_size(300.0)
             .show(ui, |ui| {
-                egui::ScrollArea::vertical()
-                    .id_salt("left")
-                    .show(ui, |ui| {
-                        self.schedule_ui(ui);
-                        ui.separator();
-                        self.params_ui(ui);
-                    });
+                egui::ScrollArea::vertical().id_salt("left").show(ui, |ui| {
+                    self.schedule_ui(ui);
+                    ui.separator();
+                    self.params_ui(ui);
+                });
             });
         egui::Panel::right("inspector")
             .default_size(290.0)
@@ -301,7 +343,10 @@ impl ViewerApp {
         };
         let Some(s) = self.snap.clone() else { return };
         if plan.started.elapsed().as_secs() > 600 {
-            set_error(&self.exit_error, "the exit plan did not finish within 600 s".into());
+            set_error(
+                &self.exit_error,
+                "the exit plan did not finish within 600 s".into(),
+            );
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             return;
         }
@@ -428,9 +473,7 @@ impl ViewerApp {
                     ui.end_row();
                     for p in s.phenomena.iter().filter(|p| p.set == *set) {
                         let mut on = p.enabled;
-                        let r = ui
-                            .checkbox(&mut on, p.name)
-                            .on_hover_text(p.description);
+                        let r = ui.checkbox(&mut on, p.name).on_hover_text(p.description);
                         self.track(format!("phenomenon:{}", p.name), &r);
                         if r.changed() {
                             self.sim.send(Request::Apply(Command::SetPhenomenon {
@@ -486,29 +529,88 @@ impl ViewerApp {
     pub fn refresh_map(&mut self, ctx: &egui::Context) {
         let Some(s) = self.snap.clone() else { return };
         let key = (Arc::as_ptr(&s) as usize, self.base);
+        // With a painter thread: install what it finished, and give it the next job when idle.
+        if let Some(p) = self.painter.as_mut() {
+            if let Ok(done) = p.rx.try_recv() {
+                p.busy = false;
+                self.install_map(ctx, done.key, done.image, done.elevation_km);
+            }
+            let p = self.painter.as_mut().expect("painter checked above");
+            if !p.busy && self.drawn != Some(key) {
+                p.busy =
+                    p.tx.send(PaintJob {
+                        key,
+                        snap: s,
+                        layer: self.base,
+                        elevation: self.globe_ready,
+                    })
+                    .is_ok();
+            }
+            return;
+        }
         if self.drawn == Some(key) && self.map_tex.is_some() {
             return;
         }
-        let img = Arc::new(map::render_base(&s, self.base));
+        let done = paint_job(PaintJob {
+            key,
+            snap: s,
+            layer: self.base,
+            elevation: self.globe_ready,
+        });
+        self.install_map(ctx, done.key, done.image, done.elevation_km);
+    }
+
+    fn install_map(
+        &mut self,
+        ctx: &egui::Context,
+        key: (usize, BaseLayer),
+        img: Arc<ColorImage>,
+        elevation_km: Option<Arc<Vec<f32>>>,
+    ) {
         match &mut self.map_tex {
             Some(t) => t.set(img.clone(), TextureOptions::LINEAR),
             None => {
                 self.map_tex = Some(ctx.load_texture("map", img.clone(), TextureOptions::LINEAR))
             }
         }
-        if self.globe_ready {
-            let lk = &s.lookup;
-            use rayon::prelude::*;
-            self.map_elevation = Arc::new(
-                (0..lk.corners.len())
-                    .into_par_iter()
-                    .map(|i| lk.lerp(&s.crust.elevation_km, i))
-                    .collect(),
-            );
+        if let Some(e) = elevation_km {
+            self.map_elevation = e;
         }
         self.map_image = Some(img);
         self.map_generation += 1;
         self.drawn = Some(key);
+    }
+
+    /// Colours the map on a thread of its own from now on (the window does this; headless
+    /// tests colour it in the frame, so that a frame shows its result at once).
+    pub fn start_map_painter(&mut self, ctx: &egui::Context) {
+        let (tx, jobs) = std::sync::mpsc::channel::<PaintJob>();
+        let (done_tx, rx) = std::sync::mpsc::channel();
+        let ctx = ctx.clone();
+        let spawned = std::thread::Builder::new()
+            .name("planet-map".into())
+            .spawn(move || {
+                while let Ok(mut job) = jobs.recv() {
+                    // Only the newest job matters.
+                    while let Ok(newer) = jobs.try_recv() {
+                        job = newer;
+                    }
+                    if done_tx.send(paint_job(job)).is_err() {
+                        return;
+                    }
+                    ctx.request_repaint();
+                }
+            });
+        match spawned {
+            Ok(_) => {
+                self.painter = Some(MapPainter {
+                    tx,
+                    rx,
+                    busy: false,
+                })
+            }
+            Err(e) => tracing::warn!("no map painter thread ({e}); colouring in the frame"),
+        }
     }
 
     fn map_ui(&mut self, ui: &mut egui::Ui) {
@@ -623,7 +725,8 @@ impl ViewerApp {
         if resp.hovered() {
             let scroll = ui.input(|i| i.smooth_scroll_delta.y);
             if scroll != 0.0 {
-                self.camera.distance = (self.camera.distance * (1.0 - scroll * 0.002)).clamp(1.2, 12.0);
+                self.camera.distance =
+                    (self.camera.distance * (1.0 - scroll * 0.002)).clamp(1.2, 12.0);
             }
         }
         if resp.clicked()
@@ -643,7 +746,9 @@ impl ViewerApp {
             );
             return;
         }
-        let Some(img) = self.map_image.clone() else { return };
+        let Some(img) = self.map_image.clone() else {
+            return;
+        };
         let eye = self.camera.eye().normalize();
         let side = glam::Vec3::Z.cross(eye).normalize_or_zero();
         let light = (eye + 0.4 * glam::Vec3::Z + 0.4 * side).normalize();
@@ -672,7 +777,8 @@ impl ViewerApp {
         let lk = &s.lookup;
         let u = ((ll.lon + 180.0) / 360.0).clamp(0.0, 0.99999);
         let v = ((90.0 - ll.lat) / 180.0).clamp(0.0, 0.99999);
-        let i = (v * lk.height as f64) as usize * lk.width as usize + (u * lk.width as f64) as usize;
+        let i =
+            (v * lk.height as f64) as usize * lk.width as usize + (u * lk.width as f64) as usize;
         s.crust.plate.get(lk.sample_of(i)).copied()
     }
 
@@ -795,7 +901,10 @@ impl ViewerApp {
             self.rift_line.len()
         ));
         ui.horizontal(|ui| {
-            let r = ui.add_enabled(self.rift_line.len() >= 2, egui::Button::new("Rift along line"));
+            let r = ui.add_enabled(
+                self.rift_line.len() >= 2,
+                egui::Button::new("Rift along line"),
+            );
             self.track("rift_line", &r);
             if r.clicked() {
                 self.sim.send(Request::Apply(Command::RiftLine {

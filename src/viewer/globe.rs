@@ -226,9 +226,11 @@ pub fn grid_sphere(lon_segments: u32) -> (Vec<[f32; 2]>, Vec<u32>) {
     let lat_segments = lon_segments / 2;
     let mut v = Vec::new();
     for j in 0..=lat_segments {
-        let lat = -std::f32::consts::FRAC_PI_2 + std::f32::consts::PI * j as f32 / lat_segments as f32;
+        let lat =
+            -std::f32::consts::FRAC_PI_2 + std::f32::consts::PI * j as f32 / lat_segments as f32;
         for i in 0..=lon_segments {
-            let lon = -std::f32::consts::PI + 2.0 * std::f32::consts::PI * i as f32 / lon_segments as f32;
+            let lon =
+                -std::f32::consts::PI + 2.0 * std::f32::consts::PI * i as f32 / lon_segments as f32;
             v.push([lat, lon]);
         }
     }
@@ -393,8 +395,15 @@ mod tests {
         .validate(&module)
         .expect("globe.wgsl validates");
         let _ = info;
-        let names: Vec<&str> = module.entry_points.iter().map(|e| e.name.as_str()).collect();
-        assert!(names.contains(&"vs_main") && names.contains(&"fs_main"), "{names:?}");
+        let names: Vec<&str> = module
+            .entry_points
+            .iter()
+            .map(|e| e.name.as_str())
+            .collect();
+        assert!(
+            names.contains(&"vs_main") && names.contains(&"fs_main"),
+            "{names:?}"
+        );
         // The uniform block matches the host struct's size.
         let globe = module
             .global_variables
@@ -431,8 +440,13 @@ mod tests {
     #[test]
     fn picking_the_centre_of_the_view_hits_the_point_under_the_eye() {
         let cam = Camera::default();
-        let hit = cam.pick(1.6, [0.0, 0.0]).expect("the centre ray hits the globe");
+        let hit = cam
+            .pick(1.6, [0.0, 0.0])
+            .expect("the centre ray hits the globe");
         assert!(hit.dot(cam.eye().normalize()) > 0.9999);
-        assert!(cam.pick(1.6, [1.0, 1.0]).is_none(), "the corner looks past the globe");
+        assert!(
+            cam.pick(1.6, [1.0, 1.0]).is_none(),
+            "the corner looks past the globe"
+        );
     }
 }

@@ -59,6 +59,28 @@ impl BaseLayer {
     }
 }
 
+impl std::str::FromStr for BaseLayer {
+    type Err = String;
+    /// A layer by name (`elevation`, `plates`, `crust_type`, `oceanic_age`, `orogeny_type`,
+    /// `orogeny_age`, `laplacian`).
+    fn from_str(s: &str) -> Result<Self, String> {
+        let names = [
+            "elevation",
+            "plates",
+            "crust_type",
+            "oceanic_age",
+            "orogeny_type",
+            "orogeny_age",
+            "laplacian",
+        ];
+        names
+            .iter()
+            .position(|n| *n == s.trim())
+            .map(|i| Self::ALL[i])
+            .ok_or_else(|| format!("unknown overlay \"{s}\"; one of: {}", names.join(", ")))
+    }
+}
+
 /// Which vector layers are drawn over the base layer.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct VectorLayers {
@@ -72,6 +94,29 @@ pub struct VectorLayers {
     pub fronts: bool,
     /// Terranes (entities).
     pub terranes: bool,
+}
+
+impl VectorLayers {
+    /// Switches on the named layers (`folds`, `ridges`, `velocity`, `fronts`, `terranes`).
+    pub fn from_names(names: &[String]) -> Result<Self, String> {
+        let mut l = Self::default();
+        for n in names {
+            match n.trim() {
+                "folds" => l.folds = true,
+                "ridges" => l.ridges = true,
+                "velocity" => l.velocity = true,
+                "fronts" => l.fronts = true,
+                "terranes" => l.terranes = true,
+                "" => {}
+                other => {
+                    return Err(format!(
+                        "unknown layer \"{other}\"; any of: folds, ridges, velocity, fronts, terranes"
+                    ));
+                }
+            }
+        }
+        Ok(l)
+    }
 }
 
 /// The map samples (elevation in metres, plate, crust type, age) of every lookup pixel.

@@ -52,6 +52,12 @@ pub struct ViewerOptions {
     pub screenshot: Option<PathBuf>,
     /// Start in the 3D globe view.
     pub globe: bool,
+    /// Steps per second while running (0: as fast as possible).
+    pub steps_per_second: f64,
+    /// The map's base layer at start.
+    pub base: map::BaseLayer,
+    /// Vector layers drawn at start.
+    pub layers: map::VectorLayers,
 }
 
 impl Default for ViewerOptions {
@@ -61,6 +67,9 @@ impl Default for ViewerOptions {
             exit_after_steps: None,
             screenshot: None,
             globe: false,
+            steps_per_second: 0.0,
+            base: map::BaseLayer::Elevation,
+            layers: map::VectorLayers::default(),
         }
     }
 }
@@ -100,6 +109,8 @@ pub fn run(
             .with_title("planet view")
             .with_inner_size(opts.window_size),
         renderer: eframe::Renderer::Wgpu,
+        // Frames come as fast as they are drawn (Xvfb has no vertical blank to wait for).
+        vsync: false,
         ..Default::default()
     };
     let report = std::sync::Arc::new(std::sync::Mutex::new(ViewerReport::default()));
@@ -118,6 +129,13 @@ pub fn run(
             }
             app.exit_error = err2;
             app.view3d = opts.globe;
+            app.base = opts.base;
+            app.layers = opts.layers;
+            app.start_map_painter(&cc.egui_ctx);
+            if opts.steps_per_second > 0.0 {
+                app.steps_per_second = opts.steps_per_second;
+                app.sim.send(Request::SetSpeed(opts.steps_per_second));
+            }
             if let Some(n) = opts.exit_after_steps {
                 app = app.with_exit_plan(ExitPlan::new(n, opts.screenshot.clone()));
             }

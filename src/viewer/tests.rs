@@ -99,15 +99,13 @@ impl Harness {
     }
 
     fn rect(&self, key: &str) -> egui::Rect {
-        *self
-            .app
-            .rects
-            .get(key)
-            .unwrap_or_else(|| panic!("no widget \"{key}\" was drawn; drawn: {:?}", {
+        *self.app.rects.get(key).unwrap_or_else(|| {
+            panic!("no widget \"{key}\" was drawn; drawn: {:?}", {
                 let mut k: Vec<_> = self.app.rects.keys().collect();
                 k.sort();
                 k
-            }))
+            })
+        })
     }
 
     fn click(&mut self, key: &str) {
@@ -153,7 +151,11 @@ fn unticking_a_plugin_in_the_schedule_panel_stops_its_systems() {
     h.step(2);
     // The third-party phenomenon is listed with a checkbox, ticked.
     let snap = h.app.snap.clone().unwrap();
-    assert!(snap.phenomena.iter().any(|p| p.name == "counter" && p.enabled));
+    assert!(
+        snap.phenomena
+            .iter()
+            .any(|p| p.name == "counter" && p.enabled)
+    );
     h.click("phenomenon:counter");
     h.settle();
     let snap = h.app.snap.clone().unwrap();
@@ -237,7 +239,11 @@ fn selecting_a_plate_and_changing_its_speed_changes_that_plates_entity() {
         "the selected plate is the one under the clicked point"
     );
     let before = snap.plate(id).unwrap().speed_mm_per_yr.abs();
-    let new_speed = if (before - 123.0).abs() < 1.0 { 77.0 } else { 123.0 };
+    let new_speed = if (before - 123.0).abs() < 1.0 {
+        77.0
+    } else {
+        123.0
+    };
     // Type a new speed into the inspector, then press "Apply motion".
     let mut e = h.app.edit.expect("the inspector loaded the plate's motion");
     assert_eq!(e.plate, id);
@@ -282,8 +288,15 @@ fn the_overlay_menu_switches_what_is_drawn() {
     let snap = h.app.snap.clone().unwrap();
     let drawn = |h: &Harness| map::image_hash(h.app.map_image.as_ref().expect("a map is drawn"));
     let elevation = drawn(&h);
-    assert_eq!(elevation, map::image_hash(&map::render_base(&snap, BaseLayer::Elevation)));
-    for layer in [BaseLayer::Plates, BaseLayer::OceanicAge, BaseLayer::CrustType] {
+    assert_eq!(
+        elevation,
+        map::image_hash(&map::render_base(&snap, BaseLayer::Elevation))
+    );
+    for layer in [
+        BaseLayer::Plates,
+        BaseLayer::OceanicAge,
+        BaseLayer::CrustType,
+    ] {
         h.click(&format!("overlay:{}", layer.label()));
         h.frame(Vec::new());
         assert_eq!(h.app.base, layer);
@@ -347,8 +360,14 @@ fn bad_parameters_are_refused_with_the_key_and_nothing_is_sent() {
     assert!(!h.app.apply_params(&snap, false));
     assert_eq!(h.app.sim.last_sent(), sent, "nothing was sent");
     let e = &h.app.param_errors;
-    assert!(e["time.time_step_my"].contains("time.time_step_my"), "{e:?}");
-    assert!(e["subduction.distance_km"].contains("not a number"), "{e:?}");
+    assert!(
+        e["time.time_step_my"].contains("time.time_step_my"),
+        "{e:?}"
+    );
+    assert!(
+        e["subduction.distance_km"].contains("not a number"),
+        "{e:?}"
+    );
     // A valid change goes to the running planet.
     h.app.param_text = Default::default();
     h.frame(Vec::new());
@@ -380,7 +399,11 @@ fn run_until_stops_at_the_target_time() {
         h.frame(Vec::new());
         let s = h.app.snap.clone().unwrap();
         if !s.running && s.time_my >= 10.0 {
-            assert!((s.time_my - 10.0).abs() < 1e-9, "stopped at {} My", s.time_my);
+            assert!(
+                (s.time_my - 10.0).abs() < 1e-9,
+                "stopped at {} My",
+                s.time_my
+            );
             break;
         }
         assert!(std::time::Instant::now() < deadline, "did not reach 10 My");

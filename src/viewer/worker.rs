@@ -297,7 +297,9 @@ impl SimHandle {
     pub fn wait_ready(&self, timeout: Duration) -> Result<Arc<Snapshot>, String> {
         let deadline = Instant::now() + timeout;
         let (lock, cvar) = &*self.shared;
-        let mut s = lock.lock().map_err(|_| "the simulation thread died".to_string())?;
+        let mut s = lock
+            .lock()
+            .map_err(|_| "the simulation thread died".to_string())?;
         loop {
             if let Some(e) = &s.failed {
                 return Err(e.clone());
@@ -452,10 +454,9 @@ impl Worker {
             // Wait for a request: forever when paused, up to the next step when running.
             let wait = if self.running {
                 if self.steps_per_second > 0.0 {
-                    Duration::from_secs_f64(1.0 / self.steps_per_second)
-                        .saturating_sub(Duration::from_secs_f64(
-                            self.last_step_ms.unwrap_or(0.0) / 1e3,
-                        ))
+                    Duration::from_secs_f64(1.0 / self.steps_per_second).saturating_sub(
+                        Duration::from_secs_f64(self.last_step_ms.unwrap_or(0.0) / 1e3),
+                    )
                 } else {
                     Duration::ZERO
                 }
@@ -525,7 +526,8 @@ impl Worker {
                 self.running = false;
                 for _ in 0..n {
                     self.step_once();
-                    if !self.log.is_empty() && self.log[self.log.len() - 1].starts_with("step failed")
+                    if !self.log.is_empty()
+                        && self.log[self.log.len() - 1].starts_with("step failed")
                     {
                         break;
                     }
@@ -633,11 +635,9 @@ impl Worker {
                         .map_err(|e| e.to_string())
                 })();
                 match result {
-                    Ok(files) => self.say(format!(
-                        "wrote {} maps into {}",
-                        files.len(),
-                        dir.display()
-                    )),
+                    Ok(files) => {
+                        self.say(format!("wrote {} maps into {}", files.len(), dir.display()))
+                    }
                     Err(e) => self.say(format!("export failed: {e}")),
                 }
             }

@@ -104,13 +104,15 @@ pub fn run(
     handle
         .wait_ready(BUILD_TIMEOUT)
         .map_err(ViewerError::Planet)?;
+    let mut wgpu_options = eframe::egui_wgpu::WgpuConfiguration::default();
+    // Frames come as fast as they are drawn (Xvfb has no vertical blank to wait for).
+    wgpu_options.surface.present_mode = eframe::wgpu::PresentMode::AutoNoVsync;
     let native = eframe::NativeOptions {
         viewport: eframe::egui::ViewportBuilder::default()
             .with_title("planet view")
             .with_inner_size(opts.window_size),
         renderer: eframe::Renderer::Wgpu,
-        // Frames come as fast as they are drawn (Xvfb has no vertical blank to wait for).
-        vsync: false,
+        wgpu_options,
         ..Default::default()
     };
     let report = std::sync::Arc::new(std::sync::Mutex::new(ViewerReport::default()));

@@ -18,6 +18,8 @@ pub mod random;
 pub mod resources;
 pub mod simulation;
 pub mod systems;
+#[cfg(feature = "viewer")]
+pub mod viewer;
 
 pub use simulation::{SimError, Simulation};
 

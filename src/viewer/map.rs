@@ -1,0 +1,368 @@
+//! The 2D equirectangular map of the viewer: base layers (elevation with hypsometric tint and
+//! hillshade, plates, crust type, oceanic age, orogeny type and age, elevation Laplacian)
+//! coloured from a [`Snapshot`], and vector layers (fold and ridge directions, plate velocity
+//! arrows, subduction fronts and terranes from their entities) painted on top.
+
+use eframe::egui;
+use egui::{Color32, ColorImage, Pos2, Rect, Stroke, Vec2};
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::commands::LatLon;
+use crate::geometry::spherical::to_lat_lon_deg;
+use crate::io::maps::{MapSample, Raster, plate_colour};
+use crate::resources::{CrustType, Orogeny};
+
+use super::worker::Snapshot;
+
+/// What the map is coloured by.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BaseLayer {
+    /// Hypsometric tint with hillshade.
+    Elevation,
+    /// One colour per plate, continents lighter.
+    Plates,
+    /// Continental or oceanic, with the coastline.
+    CrustType,
+    /// Age of the ocean floor.
+    OceanicAge,
+    /// Andean or Himalayan orogeny.
+    OrogenyType,
+    /// Time since the last orogeny.
+    OrogenyAge,
+    /// Laplacian of the elevation (ridges bright, valleys dark).
+    Laplacian,
+}
+
+impl BaseLayer {
+    /// Every base layer, in menu order.
+    pub const ALL: [BaseLayer; 7] = [
+        Self::Elevation,
+        Self::Plates,
+        Self::CrustType,
+        Self::OceanicAge,
+        Self::OrogenyType,
+        Self::OrogenyAge,
+        Self::Laplacian,
+    ];
+    /// Menu label.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Elevation => "Elevation",
+            Self::Plates => "Plates",
+            Self::CrustType => "Crust type",
+            Self::OceanicAge => "Oceanic age",
+            Self::OrogenyType => "Orogeny type",
+            Self::OrogenyAge => "Orogeny age",
+            Self::Laplacian => "Elevation Laplacian",
+        }
+    }
+}
+
+impl std::str::FromStr for BaseLayer {
+    type Err = String;
+    /// A layer by name (`elevation`, `plates`, `crust_type`, `oceanic_age`, `orogeny_type`,
+    /// `orogeny_age`, `laplacian`).
+    fn from_str(s: &str) -> Result<Self, String> {
+        let names = [
+            "elevation",
+            "plates",
+            "crust_type",
+            "oceanic_age",
+            "orogeny_type",
+            "orogeny_age",
+            "laplacian",
+        ];
+        names
+            .iter()
+            .position(|n| *n == s.trim())
+            .map(|i| Self::ALL[i])
+            .ok_or_else(|| format!("unknown overlay \"{s}\"; one of: {}", names.join(", ")))
+    }
+}
+
+/// Which vector layers are drawn over the base layer.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct VectorLayers {
+    /// Fold directions on continental crust.
+    pub folds: bool,
+    /// Ridge directions on oceanic crust.
+    pub ridges: bool,
+    /// Plate velocity arrows.
+    pub velocity: bool,
+    /// Subduction fronts (entities).
+    pub fronts: bool,
+    /// Terranes (entities).
+    pub terranes: bool,
+}
+
+impl VectorLayers {
+    /// Switches on the named layers (`folds`, `ridges`, `velocity`, `fronts`, `terranes`).
+    pub fn from_names(names: &[String]) -> Result<Self, String> {
+        let mut l = Self::default();
+        for n in names {
+            match n.trim() {
+                "folds" => l.folds = true,
+                "ridges" => l.ridges = true,
+                "velocity" => l.velocity = true,
+                "fronts" => l.fronts = true,
+                "terranes" => l.terranes = true,
+                "" => {}
+                other => {
+                    return Err(format!(
+                        "unknown layer \"{other}\"; any of: folds, ridges, velocity, fronts, terranes"
+                    ));
+                }
+            }
+        }
+        Ok(l)
+    }
+}
+
+/// The map samples (elevation in metres, plate, crust type, age) of every lookup pixel.
+fn raster_of(s: &Snapshot) -> Raster {
+    let lk = &s.lookup;
+    let c = &s.crust;
+    let samples: Vec<MapSample> = (0..lk.corners.len())
+        .into_par_iter()
+        .map(|i| {
+            let d = lk.sample_of(i);
+            MapSample {
+                elevation_m: lk.lerp(&c.elevation_km, i) * 1000.0,
+                plate: c.plate[d],
+                continental: c.crust_type[d] == CrustType::Continental,
+                age_my: lk.lerp(&c.age_my, i),
+            }
+        })
+        .collect();
+    Raster {
+        width: lk.width,
+        height: lk.height,
+        samples,
+    }
+}
+
+fn rgb_to_color_image(img: image::RgbImage) -> ColorImage {
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    ColorImage::from_rgb([w, h], img.as_raw())
+}
+
+fn per_pixel(s: &Snapshot, f: impl Fn(usize) -> Color32 + Sync + Send) -> ColorImage {
+    let lk = &s.lookup;
+    let pixels: Vec<Color32> = (0..lk.corners.len()).into_par_iter().map(f).collect();
+    ColorImage::new([lk.width as usize, lk.height as usize], pixels)
+}
+
+fn lerp_colour(stops: &[(f32, [u8; 3])], v: f32) -> Color32 {
+    let mut c = stops[0].1;
+    if v > stops[0].0 {
+        c = stops[stops.len() - 1].1;
+        for w in stops.windows(2) {
+            if v <= w[1].0 {
+                let t = (v - w[0].0) / (w[1].0 - w[0].0).max(1e-6);
+                let mix = |a: u8, b: u8| (a as f32 + (b as f32 - a as f32) * t).round() as u8;
+                c = [
+                    mix(w[0].1[0], w[1].1[0]),
+                    mix(w[0].1[1], w[1].1[1]),
+                    mix(w[0].1[2], w[1].1[2]),
+                ];
+                break;
+            }
+        }
+    }
+    Color32::from_rgb(c[0], c[1], c[2])
+}
+
+/// Colours the map by `layer` (one pixel per lookup pixel).
+pub fn render_base(s: &Snapshot, layer: BaseLayer) -> ColorImage {
+    match layer {
+        BaseLayer::Elevation => rgb_to_color_image(raster_of(s).elevation_image(s.radius_km)),
+        BaseLayer::Plates => rgb_to_color_image(raster_of(s).plates_image()),
+        BaseLayer::CrustType => rgb_to_color_image(raster_of(s).crust_type_image()),
+        BaseLayer::OceanicAge => rgb_to_color_image(raster_of(s).crust_age_image()),
+        BaseLayer::OrogenyType => {
+            let c = &s.crust;
+            per_pixel(s, |i| {
+                let d = s.lookup.sample_of(i);
+                match (c.crust_type[d], c.orogeny[d]) {
+                    (CrustType::Oceanic, _) => Color32::from_rgb(30, 52, 92),
+                    (_, Orogeny::None) => Color32::from_rgb(150, 150, 140),
+                    (_, Orogeny::Andean) => Color32::from_rgb(235, 140, 40),
+                    (_, Orogeny::Himalayan) => Color32::from_rgb(170, 60, 190),
+                }
+            })
+        }
+        BaseLayer::OrogenyAge => {
+            let c = &s.crust;
+            const STOPS: [(f32, [u8; 3]); 4] = [
+                (0.0, [255, 240, 80]),
+                (50.0, [240, 120, 40]),
+                (150.0, [150, 40, 80]),
+                (400.0, [60, 20, 60]),
+            ];
+            per_pixel(s, |i| {
+                let d = s.lookup.sample_of(i);
+                if c.crust_type[d] == CrustType::Oceanic {
+                    Color32::from_rgb(30, 52, 92)
+                } else if c.orogeny[d] == Orogeny::None {
+                    Color32::from_rgb(150, 150, 140)
+                } else {
+                    lerp_colour(&STOPS, c.orogeny_age_my[d])
+                }
+            })
+        }
+        BaseLayer::Laplacian => laplacian_image(s),
+    }
+}
+
+/// The Laplacian of the elevation on the map grid (km per pixel², wrapped in longitude),
+/// drawn diverging: convex (peaks, ridges) white-orange, concave (valleys, trenches) blue.
+fn laplacian_image(s: &Snapshot) -> ColorImage {
+    let lk = &s.lookup;
+    let (w, h) = (lk.width as usize, lk.height as usize);
+    let elev: Vec<f32> = (0..w * h)
+        .into_par_iter()
+        .map(|i| lk.lerp(&s.crust.elevation_km, i))
+        .collect();
+    const STOPS: [(f32, [u8; 3]); 5] = [
+        (-0.3, [20, 60, 200]),
+        (-0.05, [120, 160, 230]),
+        (0.0, [235, 235, 235]),
+        (0.05, [240, 170, 90]),
+        (0.3, [180, 40, 20]),
+    ];
+    per_pixel(s, |i| {
+        let (col, row) = (i % w, i / w);
+        let e = |c: usize, r: usize| elev[r * w + c];
+        let east = (col + 1) % w;
+        let west = (col + w - 1) % w;
+        let north = row.saturating_sub(1);
+        let south = (row + 1).min(h - 1);
+        // Negative Laplacian: positive on peaks.
+        let lap = 4.0 * e(col, row) - e(east, row) - e(west, row) - e(col, north) - e(col, south);
+        lerp_colour(&STOPS, lap)
+    })
+}
+
+/// Pixel position in `rect` of a world direction.
+pub fn to_screen(rect: Rect, p: DVec3) -> Pos2 {
+    let (lat, lon) = to_lat_lon_deg(p);
+    Pos2::new(
+        rect.left() + rect.width() * ((lon + 180.0) / 360.0) as f32,
+        rect.top() + rect.height() * ((90.0 - lat) / 180.0) as f32,
+    )
+}
+
+/// The point under a screen position in `rect`.
+pub fn from_screen(rect: Rect, pos: Pos2) -> LatLon {
+    let u = ((pos.x - rect.left()) / rect.width()).clamp(0.0, 1.0) as f64;
+    let v = ((pos.y - rect.top()) / rect.height()).clamp(0.0, 1.0) as f64;
+    LatLon {
+        lat: 90.0 - 180.0 * v,
+        lon: -180.0 + 360.0 * u,
+    }
+}
+
+/// East and north unit vectors at `p`.
+fn east_north(p: DVec3) -> (DVec3, DVec3) {
+    let east = DVec3::Z.cross(p).normalize_or(DVec3::Y);
+    let north = p.cross(east);
+    (east, north)
+}
+
+/// Screen direction (x right, y down) of a tangent vector `v` at `p`, with the map's x scale.
+fn screen_dir(p: DVec3, v: DVec3) -> Vec2 {
+    let (e, n) = east_north(p);
+    Vec2::new(v.dot(e) as f32, -(v.dot(n) as f32))
+}
+
+/// Paints the vector layers over the map drawn in `rect`.
+pub fn paint_vectors(painter: &egui::Painter, rect: Rect, s: &Snapshot, layers: VectorLayers) {
+    let lk = &s.lookup;
+    let spacing = 28.0f32;
+    let cols = (rect.width() / spacing).max(1.0) as usize;
+    let rows = (rect.height() / spacing).max(1.0) as usize;
+    let glyph = |c: usize, r: usize| -> (Pos2, usize, DVec3) {
+        let pos = Pos2::new(
+            rect.left() + (c as f32 + 0.5) * rect.width() / cols as f32,
+            rect.top() + (r as f32 + 0.5) * rect.height() / rows as f32,
+        );
+        let px = (((pos.x - rect.left()) / rect.width()) * lk.width as f32) as usize;
+        let py = (((pos.y - rect.top()) / rect.height()) * lk.height as f32) as usize;
+        let i = py.min(lk.height as usize - 1) * lk.width as usize + px.min(lk.width as usize - 1);
+        let d = lk.sample_of(i);
+        (pos, d, s.positions[d])
+    };
+    let c = &s.crust;
+    if layers.folds || layers.ridges {
+        for r in 0..rows {
+            for col in 0..cols {
+                let (pos, d, p) = glyph(col, r);
+                let continental = c.crust_type[d] == CrustType::Continental;
+                let (dir, colour) = if continental && layers.folds {
+                    (c.fold_dir[d], Color32::from_rgb(120, 30, 10))
+                } else if !continental && layers.ridges {
+                    (c.ridge_dir[d], Color32::from_rgb(250, 250, 255))
+                } else {
+                    continue;
+                };
+                let v = DVec3::new(dir[0] as f64, dir[1] as f64, dir[2] as f64);
+                let sd = screen_dir(p, v);
+                if sd.length() < 1e-6 {
+                    continue;
+                }
+                let half = sd.normalized() * (spacing * 0.35);
+                painter.line_segment([pos - half, pos + half], Stroke::new(1.5, colour));
+            }
+        }
+    }
+    if layers.velocity {
+        let scale = spacing * 0.8 / 100.0; // 100 mm/yr = 0.8 glyph spacing
+        for r in 0..rows {
+            for col in 0..cols {
+                let (pos, d, p) = glyph(col, r);
+                let Some(plate) = s.plate(c.plate[d]) else {
+                    continue;
+                };
+                let v = plate.pole_unit.cross(p) * (plate.angular_speed_rad_per_my * s.radius_km);
+                let sd = screen_dir(p, v) * scale as f32;
+                if sd.length() < 1.0 {
+                    painter.circle_filled(pos, 1.5, Color32::BLACK);
+                    continue;
+                }
+                painter.arrow(pos, sd, Stroke::new(1.3, Color32::from_rgb(15, 15, 15)));
+            }
+        }
+    }
+    if layers.fronts {
+        for f in &s.fronts {
+            for p in &f.points_world {
+                painter.circle_filled(to_screen(rect, *p), 1.8, Color32::from_rgb(255, 40, 40));
+            }
+        }
+    }
+    if layers.terranes {
+        let total = 4.0 * std::f64::consts::PI * s.radius_km * s.radius_km;
+        for t in &s.terranes {
+            let r = (rect.width() as f64 * 0.25 * (t.area_km2 / total).sqrt()).max(2.0) as f32;
+            let [cr, cg, cb] = plate_colour(t.plate);
+            painter.circle_stroke(
+                to_screen(rect, t.centroid_world),
+                r,
+                Stroke::new(2.0, Color32::from_rgb(cr, cg, cb)),
+            );
+            painter.circle_filled(to_screen(rect, t.centroid_world), 2.0, Color32::BLACK);
+        }
+    }
+}
+
+/// Hash of an image's pixels (for tests and change detection).
+pub fn image_hash(img: &ColorImage) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    img.size.hash(&mut h);
+    for p in &img.pixels {
+        p.to_array().hash(&mut h);
+    }
+    h.finish()
+}

@@ -229,9 +229,9 @@ fn diverging_hemispheres_make_a_ridge() {
 #[test]
 fn continents_move_with_their_plates() {
     let mut sim = Simulation::new(params(100_000, 11)).unwrap();
-    // Collisions move terranes between plates on purpose and slab pull changes the motion the
-    // prediction uses; here a continent must ride its plate as it was set moving.
-    for name in ["collision", "terranes", "slab_pull"] {
+    // Collisions move terranes between plates on purpose, and slab pull and rifts change the
+    // motion the prediction uses; here a continent must ride its plate as it was set moving.
+    for name in ["collision", "terranes", "slab_pull", "rifting"] {
         sim.set_enabled(name, false).unwrap();
     }
     let mesh = sim.mesh().clone();

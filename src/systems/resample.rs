@@ -543,9 +543,15 @@ fn spread_continent(
                 continue;
             }
             visited[v] = true;
+            // When claiming, only ocean right next to the claiming plate's own continent.
+            let owner_ok = match spread {
+                Spread::Within(_) => true,
+                Spread::Claim(p) => next.plate[u] == p,
+            };
             if next.crust_type[v] == CrustType::Oceanic
                 && debt > 0
                 && next.crust_type[u] == CrustType::Continental
+                && owner_ok
             {
                 next.crust_type[v] = CrustType::Continental;
                 next.elevation_km[v] = next.elevation_km[u].max(0.0);

@@ -492,6 +492,22 @@ pub fn displace_overridden_continents(
             );
             spilled += debt - left;
             moved += debt - left;
+            if left > 0 {
+                // Landlocked (its continent borders no ocean at all): as a last resort the
+                // nearest ocean bordering any continent turns continental, keeping its plate.
+                visited.iter_mut().for_each(|v| *v = false);
+                let rest = spread_continent(
+                    mesh,
+                    next,
+                    &starts,
+                    left,
+                    Spread::Anywhere,
+                    &mut visited,
+                    thickness,
+                );
+                spilled += left - rest;
+                moved += left - rest;
+            }
         }
         visited.iter_mut().for_each(|v| *v = false);
     }
@@ -508,8 +524,10 @@ pub fn displace_overridden_continents(
 enum Spread {
     /// Only through and into this plate's samples.
     Within(u32),
-    /// Through any plate; the samples it turns join this plate.
+    /// Through any plate, next to this plate's continent; the samples it turns join this plate.
     Claim(u32),
+    /// Through any plate, next to any continent; the samples keep their plate.
+    Anywhere,
 }
 
 /// Breadth-first from `starts`, turns up to `debt` oceanic samples next to continental ones into
@@ -525,7 +543,7 @@ fn spread_continent(
 ) -> usize {
     let plate = match spread {
         Spread::Within(p) => Some(p),
-        Spread::Claim(_) => None,
+        Spread::Claim(_) | Spread::Anywhere => None,
     };
     let mut queue: std::collections::VecDeque<u32> = starts.iter().copied().collect();
     for &s in starts {
@@ -545,7 +563,7 @@ fn spread_continent(
             visited[v] = true;
             // When claiming, only ocean right next to the claiming plate's own continent.
             let owner_ok = match spread {
-                Spread::Within(_) => true,
+                Spread::Within(_) | Spread::Anywhere => true,
                 Spread::Claim(p) => next.plate[u] == p,
             };
             if next.crust_type[v] == CrustType::Oceanic

@@ -3,6 +3,10 @@
 //! validity and layout, and the kernel against its CPU reference on a GPU adapter (lavapipe on
 //! CI; skipped with a message without one, except with `CI=true`, where that fails).
 
+mod common;
+
+use common::{fresh_seed, gpu_or_skip};
+
 use glam::DVec3;
 use tectonic_planets::amplify::exemplar::{Exemplar, synthetic_exemplar};
 use tectonic_planets::amplify::{
@@ -11,7 +15,6 @@ use tectonic_planets::amplify::{
 };
 use tectonic_planets::geometry::{SphereMesh, from_lat_lon_deg};
 use tectonic_planets::gpu::amplify::{AmplifyGpu, amplify_gpu};
-use tectonic_planets::gpu::{BackendChoice, GpuContext, select_backend};
 use tectonic_planets::io::export::GeoGrid;
 use tectonic_planets::prelude::*;
 use tectonic_planets::random::SimRng;
@@ -478,35 +481,6 @@ fn amplify_shader_validates_and_matches_the_rust_layout() {
     }
 }
 
-/// An adapter (lavapipe on CI), or None with a message when there is none outside CI (where a
-/// missing adapter is a failure), as in tests/gpu.rs.
-fn gpu_or_skip(test: &str) -> Option<GpuContext> {
-    match select_backend(BackendChoice::Gpu) {
-        Ok(s) => s.context,
-        Err(e) => {
-            if std::env::var("CI").is_ok_and(|v| v == "true") {
-                panic!("{test}: no GPU adapter on CI (is mesa-vulkan-drivers installed?): {e}");
-            }
-            eprintln!("{test}: SKIPPED, no GPU adapter: {e}");
-            None
-        }
-    }
-}
-
-/// A fresh seed each run (from the clock), or `AMPLIFY_TEST_SEED` to replay one.
-fn fresh_seed() -> u64 {
-    if let Some(s) = std::env::var("AMPLIFY_TEST_SEED")
-        .ok()
-        .and_then(|s| s.parse().ok())
-    {
-        return s;
-    }
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos() as u64)
-        .unwrap_or(1)
-}
-
 /// A random crust on `mesh`: elevations from −8 to +6 km, half continental, a third of it in
 /// each orogeny (none, Andean, Himalayan), random ages, fold and ridge directions.
 fn random_crust(mesh: &SphereMesh, rng: &mut SimRng) -> Crust {
@@ -553,7 +527,7 @@ fn amplify_kernel_matches_cpu_reference() {
     let Some(mut ctx) = gpu_or_skip("amplify") else {
         return;
     };
-    let seed = fresh_seed();
+    let seed = fresh_seed("AMPLIFY_TEST_SEED");
     eprintln!("amplify_kernel_matches_cpu_reference: seed {seed} (AMPLIFY_TEST_SEED to replay)");
     let mut rng = SimRng::new(seed, 1);
     let mesh = SphereMesh::fibonacci(20_000, 0.5, seed, RADIUS_KM).unwrap();

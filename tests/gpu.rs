@@ -5,6 +5,8 @@
 
 mod common;
 
+use common::{fresh_seed, gpu_or_skip};
+
 use std::path::PathBuf;
 
 use tectonic_planets::gpu::aging::{aging_cpu, aging_dispatch};
@@ -16,7 +18,7 @@ use tectonic_planets::gpu::resample_locate::{
 use tectonic_planets::gpu::subduction_uplift::{
     UpliftConstants, read_back, subduction_uplift_cpu, subduction_uplift_dispatch,
 };
-use tectonic_planets::gpu::{BackendChoice, GpuContext, select_backend, shader_source};
+use tectonic_planets::gpu::{BackendChoice, GpuContext, shader_source};
 use tectonic_planets::prelude::*;
 use tectonic_planets::random::SimRng;
 use tectonic_planets::resources::convergence::NONE;
@@ -69,34 +71,6 @@ fn every_shader_validates_with_naga() {
     assert!(validate(&broken).is_err(), "naga accepted a type error");
 }
 
-/// An adapter (lavapipe on CI), or None with a message when there is none outside CI.
-fn gpu_or_skip(test: &str) -> Option<GpuContext> {
-    match select_backend(BackendChoice::Gpu) {
-        Ok(s) => s.context,
-        Err(e) => {
-            if std::env::var("CI").is_ok_and(|v| v == "true") {
-                panic!("{test}: no GPU adapter on CI (is mesa-vulkan-drivers installed?): {e}");
-            }
-            eprintln!("{test}: SKIPPED, no GPU adapter: {e}");
-            None
-        }
-    }
-}
-
-/// A fresh seed each run (from the clock), or `GPU_TEST_SEED` to replay one.
-fn fresh_seed() -> u64 {
-    if let Some(s) = std::env::var("GPU_TEST_SEED")
-        .ok()
-        .and_then(|s| s.parse().ok())
-    {
-        return s;
-    }
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos() as u64)
-        .unwrap_or(1)
-}
-
 /// A random crust of `n` samples: elevations from −10 to +10 km, half continental, a third
 /// with an orogeny, random ages and fold directions.
 fn random_crust(n: usize, rng: &mut SimRng) -> Crust {
@@ -141,7 +115,7 @@ fn erosion_kernel_matches_cpu_reference() {
     let Some(mut ctx) = gpu_or_skip("erosion") else {
         return;
     };
-    let seed = fresh_seed();
+    let seed = fresh_seed("GPU_TEST_SEED");
     let mut rng = SimRng::new(seed, 1);
     let crust = random_crust(N, &mut rng);
     let mut params = Params::default();
@@ -175,7 +149,7 @@ fn aging_kernel_matches_cpu_reference_bit_for_bit() {
     let Some(mut ctx) = gpu_or_skip("aging") else {
         return;
     };
-    let seed = fresh_seed();
+    let seed = fresh_seed("GPU_TEST_SEED");
     let mut rng = SimRng::new(seed, 2);
     let crust = random_crust(N, &mut rng);
     let dt = (0.5 + rng.next_f64() * 4.0) as f32;
@@ -208,7 +182,7 @@ fn subduction_uplift_kernel_matches_cpu_reference() {
     let Some(mut ctx) = gpu_or_skip("subduction_uplift") else {
         return;
     };
-    let seed = fresh_seed();
+    let seed = fresh_seed("GPU_TEST_SEED");
     let mut rng = SimRng::new(seed, 3);
     let mut crust = random_crust(N, &mut rng);
     // Mostly below sea level, as around real fronts, so both uplift and trenches act.
@@ -415,7 +389,7 @@ fn resample_locate_kernel_matches_cpu_reference() {
     let Some(mut ctx) = gpu_or_skip("resample_locate") else {
         return;
     };
-    let seed = fresh_seed();
+    let seed = fresh_seed("GPU_TEST_SEED");
     eprintln!("resample_locate: seed {seed} (GPU_TEST_SEED={seed} replays it)");
     let mut rng = SimRng::new(seed, 4);
     let mesh = SphereMesh::fibonacci(N, 0.3, seed, 6370.0).expect("mesh");

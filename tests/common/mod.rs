@@ -85,3 +85,31 @@ pub fn components(
     }
     out
 }
+
+/// A GPU adapter (lavapipe on CI), or None with a message when there is none outside CI; on CI
+/// (`CI=true`) a missing adapter is a failure.
+pub fn gpu_or_skip(test: &str) -> Option<tectonic_planets::gpu::GpuContext> {
+    use tectonic_planets::gpu::{BackendChoice, select_backend};
+    match select_backend(BackendChoice::Gpu) {
+        Ok(s) => s.context,
+        Err(e) => {
+            if std::env::var("CI").is_ok_and(|v| v == "true") {
+                panic!("{test}: no GPU adapter on CI (is mesa-vulkan-drivers installed?): {e}");
+            }
+            eprintln!("{test}: SKIPPED, no GPU adapter: {e}");
+            None
+        }
+    }
+}
+
+/// A fresh seed each run (from the clock), or the value of the environment variable `replay`
+/// to replay one.
+pub fn fresh_seed(replay: &str) -> u64 {
+    if let Some(s) = std::env::var(replay).ok().and_then(|s| s.parse().ok()) {
+        return s;
+    }
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(1)
+}

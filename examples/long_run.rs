@@ -7,10 +7,57 @@
 //! `cargo run --release --example long_run -- [samples] [steps] [seeds...]`
 //! (defaults: 100,000 samples, 1000 steps, seeds 1–5; `PLANET_LOG` for logs, `RIFT_RATE` to try
 //! another `rifting.frequency_per_my`, `TRACE_PEAK` to print every step that raised the peak
-//! memory, with what happened in it).
+//! memory, with what happened in it, `EXIT_AT=N` to stop at step N without freeing anything, for a
+//! heap profiler).
 use tectonic_planets::prelude::*;
 use tectonic_planets::resources::Sutures;
 use tectonic_planets::systems::rifting::{RiftCause, RiftLog};
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
+
+/// The system allocator, counting the bytes the program holds (live heap) and their peak, so
+/// that heap growth can be told apart from allocator fragmentation in the resident figures.
+struct Counting;
+
+static LIVE: AtomicUsize = AtomicUsize::new(0);
+static LIVE_PEAK: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        let p = unsafe { System.alloc(l) };
+        if !p.is_null() {
+            let now = LIVE.fetch_add(l.size(), Relaxed) + l.size();
+            LIVE_PEAK.fetch_max(now, Relaxed);
+        }
+        p
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        unsafe { System.dealloc(p, l) };
+        LIVE.fetch_sub(l.size(), Relaxed);
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, new: usize) -> *mut u8 {
+        let q = unsafe { System.realloc(p, l, new) };
+        if !q.is_null() {
+            if new >= l.size() {
+                let now = LIVE.fetch_add(new - l.size(), Relaxed) + new - l.size();
+                LIVE_PEAK.fetch_max(now, Relaxed);
+            } else {
+                LIVE.fetch_sub(l.size() - new, Relaxed);
+            }
+        }
+        q
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Live heap bytes now and their peak since the last call (which resets the peak).
+fn heap() -> (usize, usize) {
+    let now = LIVE.load(Relaxed);
+    (now, LIVE_PEAK.swap(now, Relaxed))
+}
 
 /// A memory figure of this process from /proc/self/status (`VmHWM:` peak, `VmRSS:` now), bytes.
 fn status_bytes(key: &str) -> u64 {
@@ -86,23 +133,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (mut land_lo, mut land_hi, mut zmax, mut worst) = (1.0f64, 0.0f64, f32::MIN, 0.0f64);
         let mut peak_at_100 = 0;
         let trace_peak = std::env::var_os("TRACE_PEAK").is_some();
+        let exit_at: Option<u64> = std::env::var("EXIT_AT").ok().and_then(|v| v.parse().ok());
         let mut last_peak = peak_rss();
         for step in 1..=steps {
             let resamplings = sim.clock().resamplings;
             let rifts = sim.world().resource::<RiftLog>().events.len();
             let sutures = sim.world().resource::<Sutures>().total;
             sim.step()?;
+            let (heap_now, heap_peak) = heap();
             if trace_peak && peak_rss() > last_peak {
                 let p = peak_rss();
                 println!(
-                    "  step {step}: peak +{:.2} MB to {:.1} MB (resampled {}, rifts {}, collisions {}, plates {}, resident {:.1} MB)",
+                    "  step {step}: peak +{:.2} MB to {:.1} MB (resampled {}, rifts {}, collisions {}, plates {}, resident {:.1} MB, heap {:.1} MB, heap peak in step {:.1} MB)",
                     (p - last_peak) as f64 / 1e6,
                     p as f64 / 1e6,
                     sim.clock().resamplings - resamplings,
                     sim.world().resource::<RiftLog>().events.len() - rifts,
                     sim.world().resource::<Sutures>().total - sutures,
                     sim.stats().plates,
-                    rss() as f64 / 1e6
+                    rss() as f64 / 1e6,
+                    heap_now as f64 / 1e6,
+                    heap_peak as f64 / 1e6
                 );
                 last_peak = p;
             }
@@ -115,6 +166,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             worst = worst.max((s.continental_fraction - c0).abs() / c0);
             if step == 100 {
                 peak_at_100 = peak_rss();
+            }
+            if exit_at == Some(step) {
+                // Without dropping anything, so that a heap profiler lists what is live now.
+                std::process::exit(0);
             }
             if step % 100 == 0 || step == steps {
                 let log = sim.world().resource::<RiftLog>();
@@ -130,7 +185,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     .continental_subducted_total_km2
                     / sim.mesh().total_area_km2();
                 println!(
-                    "seed {seed} step {step:>5} ({:>5.0} My): plates {:>3}, continental {:.3} ({:+.1}%), land {:.3}, max {:.2} km, rifts {random}, collisions {}, forced under {lost:.3}, state {:.1} MB, resident {:.0} MB, peak {:.0} MB",
+                    "seed {seed} step {step:>5} ({:>5.0} My): plates {:>3}, continental {:.3} ({:+.1}%), land {:.3}, max {:.2} km, rifts {random}, collisions {}, forced under {lost:.3}, state {:.1} MB, resident {:.0} MB, peak {:.0} MB, heap {:.1} MB",
                     sim.time_my(),
                     s.plates,
                     s.continental_fraction,
@@ -141,6 +196,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     state_mb,
                     rss() as f64 / 1e6,
                     peak_rss() as f64 / 1e6,
+                    heap_now as f64 / 1e6,
                 );
             }
         }

@@ -144,6 +144,11 @@ impl Simulation {
     /// Runs one time step (one run of the [`TectonicStep`] schedule).
     pub fn step(&mut self) -> Result<(), SimError> {
         self.app.world_mut().run_schedule(TectonicStep);
+        // A standalone bevy_ecs world keeps a removal message for every component of every
+        // despawned entity until its trackers are cleared; without this a long run (fronts,
+        // terranes and plates come and go) grows by megabytes (measured: +8.4 MB in 1000 steps at
+        // 100,000 samples). Nothing reads `RemovedComponents`, so once a step is enough.
+        self.app.world_mut().clear_trackers();
         if let Some(e) = self
             .app
             .world_mut()

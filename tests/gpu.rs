@@ -10,6 +10,9 @@ use common::{fresh_seed, gpu_or_skip};
 use std::path::PathBuf;
 
 use tectonic_planets::gpu::aging::{aging_cpu, aging_dispatch};
+use tectonic_planets::gpu::collision_uplift::{
+    CollisionSurge, collision_uplift_cpu, collision_uplift_gpu,
+};
 use tectonic_planets::gpu::erosion::{ErosionRates, erosion_cpu, erosion_dispatch};
 use tectonic_planets::gpu::resample_locate::{
     CellPlates, OverlapRules, SampleSource, resample_locate_cpu, resample_locate_gpu,
@@ -52,7 +55,13 @@ fn every_shader_validates_with_naga() {
         .iter()
         .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
         .collect();
-    for expected in ["aging", "erosion", "resample_locate", "subduction_uplift"] {
+    for expected in [
+        "aging",
+        "collision_uplift",
+        "erosion",
+        "resample_locate",
+        "subduction_uplift",
+    ] {
         assert!(
             names.iter().any(|n| n == expected),
             "shaders/{expected}.wgsl missing (found {names:?})"
@@ -274,6 +283,141 @@ fn subduction_uplift_kernel_matches_cpu_reference() {
     assert!(
         flips * 1000 <= N,
         "seed {seed}: {flips} samples differ in orogeny or fold direction"
+    );
+}
+
+#[test]
+fn collision_uplift_kernel_matches_cpu_reference() {
+    let Some(mut ctx) = gpu_or_skip("collision_uplift") else {
+        return;
+    };
+    let seed = fresh_seed("GPU_TEST_SEED");
+    let mut rng = SimRng::new(seed, 5);
+    let crust = random_crust(N, &mut rng);
+    let positions: Vec<glam::DVec3> = (0..N)
+        .map(|_| tectonic_planets::random::unit_vector(rng.next_u64(), rng.next_u64()))
+        .collect();
+    let params = Params::default();
+    let r_km = params.planet.radius_km;
+    // Three surges in a row (the later ones act on what the earlier ones made), the last with
+    // r = 0 (the whole reached area gets the peak); a quarter of the samples out of reach.
+    let surges: Vec<(CollisionSurge, Vec<f32>)> = (0..3)
+        .map(|k| {
+            let radius_km = if k == 2 {
+                0.0
+            } else {
+                300.0 + rng.next_f64() * 1700.0
+            };
+            let reach = radius_km.max(500.0) / r_km;
+            let dist = (0..N)
+                .map(|_| {
+                    if rng.next_f64() < 0.25 {
+                        f32::INFINITY
+                    } else {
+                        (rng.next_f64() * 1.2 * reach) as f32
+                    }
+                })
+                .collect();
+            let surge = CollisionSurge {
+                radius_km,
+                peak_km: 0.2 + rng.next_f64() * 4.0,
+                planet_radius_km: r_km,
+                max_elevation_km: params.continent.max_elevation_km,
+                centroid: tectonic_planets::random::unit_vector(rng.next_u64(), rng.next_u64()),
+            };
+            (surge, dist)
+        })
+        .collect();
+    ctx.sync_crust(&crust, None).expect("upload");
+    collision_uplift_gpu(&mut ctx, &positions, &surges).expect("dispatch");
+    // Poisoned host copy: every field the kernel writes must come back from the device.
+    let mut gpu = crust.clone();
+    gpu.elevation_km.fill(f32::NAN);
+    gpu.orogeny_age_my.fill(f32::NAN);
+    gpu.fold_dir.fill([f32::NAN; 3]);
+    gpu.orogeny.fill(Orogeny::Andean);
+    tectonic_planets::gpu::collision_uplift::read_back(&mut ctx, &mut gpu).expect("readback");
+    let mut cpu = crust.clone();
+    for (s, d) in &surges {
+        collision_uplift_cpu(s, &positions, d, &mut cpu);
+    }
+    let raised = (0..N)
+        .filter(|&i| cpu.elevation_km[i] != crust.elevation_km[i])
+        .count();
+    let himalayan = (0..N)
+        .filter(|&i| cpu.orogeny[i] == Orogeny::Himalayan && crust.orogeny[i] != Orogeny::Himalayan)
+        .count();
+    assert!(
+        raised > N / 5 && himalayan > N / 20,
+        "seed {seed}: inputs too tame ({raised} raised, {himalayan} new orogenies)"
+    );
+    // Tolerances: elevation within 1e-5 km (1 cm) everywhere (f32 on the GPU, f64 on the CPU,
+    // values up to 10 km); orogeny and orogeny age identical except where the f32 uplift sits at
+    // the 1 m threshold (at most 0.1% of the samples); fold directions within
+    // 1e-6 + 1e-6/|t| per component, |t| the length of the tangential vector away from the
+    // centroid before normalisation (f32 positions carry ~1e-7 of error, which the
+    // normalisation divides by |t|).
+    let mut flips = 0;
+    let mut max_dz = 0.0f32;
+    let mut max_fold = 0.0f64;
+    for (i, &p) in positions.iter().enumerate() {
+        let d = (gpu.elevation_km[i] - cpu.elevation_km[i]).abs();
+        max_dz = max_dz.max(d);
+        assert!(
+            d <= 1e-5,
+            "seed {seed}: elevation at {i}: gpu {} cpu {} (input {})",
+            gpu.elevation_km[i],
+            cpu.elevation_km[i],
+            crust.elevation_km[i]
+        );
+        if gpu.orogeny[i] != cpu.orogeny[i]
+            || gpu.orogeny_age_my[i].to_bits() != cpu.orogeny_age_my[i].to_bits()
+        {
+            flips += 1;
+            continue;
+        }
+        if cpu.fold_dir[i] == crust.fold_dir[i] {
+            assert_eq!(
+                gpu.fold_dir[i].map(f32::to_bits),
+                cpu.fold_dir[i].map(f32::to_bits),
+                "seed {seed}: fold direction at {i} changed on the GPU only"
+            );
+            continue;
+        }
+        // The last surge that set this fold direction: the last with the new orogeny here.
+        let t = surges
+            .iter()
+            .rev()
+            .map(|(s, _)| {
+                let away = p - s.centroid;
+                away - p * p.dot(away)
+            })
+            .find(|t| {
+                let f = t.normalize_or_zero();
+                (0..3).all(|k| (f[k] as f32 - cpu.fold_dir[i][k]).abs() < 1e-6)
+            });
+        let Some(t) = t else {
+            panic!("seed {seed}: fold direction at {i} from no surge");
+        };
+        let tol = 1e-6 + 1e-6 / t.length();
+        for k in 0..3 {
+            let e = (gpu.fold_dir[i][k] as f64 - cpu.fold_dir[i][k] as f64).abs();
+            max_fold = max_fold.max(e);
+            assert!(
+                e <= tol,
+                "seed {seed}: fold direction at {i}: gpu {:?} cpu {:?}",
+                gpu.fold_dir[i],
+                cpu.fold_dir[i]
+            );
+        }
+    }
+    eprintln!(
+        "collision_uplift: {raised} raised, {himalayan} new orogenies, {flips} flips, \
+         elevation within {max_dz:e} km, fold within {max_fold:e}"
+    );
+    assert!(
+        flips * 1000 <= N,
+        "seed {seed}: {flips} samples differ in orogeny"
     );
 }
 
@@ -544,8 +688,14 @@ fn fifty_steps_on_gpu_match_fifty_steps_on_cpu() {
         traffic.rechecked_samples * 20 <= resamplings * 30_000,
         "{traffic:?}"
     );
+    // Collisions happened and their surges ran on the device.
+    assert!(traffic.collision_surges > 0, "{traffic:?}");
+    // Full uploads of the crust only around resamplings, not every step: the collision
+    // kernel's right after a resampling where a terrane sutured, then the next kernels' after
+    // the CPU systems that write the crust around a resampling (measured: 37 for 16
+    // resamplings with the collision kernel on the device).
     assert!(
-        traffic.crust_uploads <= 2 * resamplings + 1 && traffic.crust_uploads < 50,
+        traffic.crust_uploads <= 3 * resamplings + 1 && traffic.crust_uploads < 50,
         "{traffic:?}, {resamplings} resamplings"
     );
     let (agree, rms_m) = compare(cpu.mesh(), cpu.crust(), gpu.crust());

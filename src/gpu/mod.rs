@@ -22,6 +22,7 @@
 
 pub mod aging;
 pub mod amplify;
+pub mod collision_uplift;
 pub mod erosion;
 pub mod resample_locate;
 pub mod subduction_uplift;
@@ -131,6 +132,8 @@ pub struct GpuTraffic {
     pub locations: u64,
     /// Samples of those locations that the kernel left to the CPU (near an edge or a tie).
     pub rechecked_samples: u64,
+    /// Collision surges applied on the device.
+    pub collision_surges: u64,
 }
 
 /// The crust fields resident on the device (see the module documentation).
@@ -166,6 +169,7 @@ pub struct GpuContext {
     pub(crate) aging: aging::AgingKernel,
     pub(crate) uplift: subduction_uplift::UpliftKernel,
     pub(crate) locate: resample_locate::LocateKernel,
+    pub(crate) collision: collision_uplift::CollisionKernel,
     crust: Option<CrustBuffers>,
     crust_synced: Option<Tick>,
     staging: Option<wgpu::Buffer>,
@@ -285,6 +289,7 @@ impl GpuContext {
         let aging = aging::AgingKernel::new(&device);
         let uplift = subduction_uplift::UpliftKernel::new(&device);
         let locate = resample_locate::LocateKernel::new(&device);
+        let collision = collision_uplift::CollisionKernel::new(&device);
         let ctx = Self {
             device,
             queue,
@@ -294,6 +299,7 @@ impl GpuContext {
             aging,
             uplift,
             locate,
+            collision,
             crust: None,
             crust_synced: None,
             staging: None,
@@ -463,6 +469,7 @@ impl GpuContext {
             self.erosion.forget_bind_group();
             self.aging.forget_bind_group();
             self.uplift.forget_bind_groups();
+            self.collision.forget_bind_group();
         }
         let Some(b) = self.crust.take() else {
             return Err(GpuError::Kernel {

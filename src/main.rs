@@ -1124,6 +1124,10 @@ fn bench(a: BenchArgs) -> Result<()> {
             "{:<28} {:>10} on the GPU, {} samples left to the CPU",
             "point locations", t.locations, t.rechecked_samples
         );
+        println!(
+            "{:<28} {:>10} on the GPU",
+            "collision surges", t.collision_surges
+        );
     }
     println!(
         "{:<28} {:>10.1} ms  ({} rifts of the largest plate into 2)",

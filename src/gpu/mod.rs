@@ -18,6 +18,10 @@
 //!   locator on the device for the whole run; per resampling it uploads the plate table and the
 //!   old crust's plates and crust types, and reads back one located source per sample.
 //!
+//! - The collision surges after a resampling ([`collision_uplift`]) keep the reference
+//!   positions on the device for the run; per surge they upload the distances to the sutured
+//!   terrane (found on the CPU by a graph search), and the fields they write are read back once.
+//!
 //! [`GpuTraffic`] counts the bytes both ways; `planet bench --backend gpu` prints them per step.
 
 pub mod aging;

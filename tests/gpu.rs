@@ -14,6 +14,9 @@ use tectonic_planets::gpu::collision_uplift::{
     CollisionSurge, collision_uplift_cpu, collision_uplift_gpu,
 };
 use tectonic_planets::gpu::erosion::{ErosionRates, erosion_cpu, erosion_dispatch};
+use tectonic_planets::gpu::resample_interpolate::{
+    resample_interpolate_cpu, resample_interpolate_gpu,
+};
 use tectonic_planets::gpu::resample_locate::{
     CellPlates, OverlapRules, SampleSource, resample_locate_cpu, resample_locate_gpu,
     resample_locate_raw,
@@ -59,6 +62,7 @@ fn every_shader_validates_with_naga() {
         "aging",
         "collision_uplift",
         "erosion",
+        "resample_interpolate",
         "resample_locate",
         "subduction_uplift",
     ] {
@@ -644,6 +648,112 @@ fn resample_locate_kernel_matches_cpu_reference() {
     }
     eprintln!("interpolated: {off} samples off by more than 1 m; largest other {max_dz:e} km");
     assert!(off * 1000 <= N, "seed {seed}: {off} elevations off");
+}
+
+#[test]
+fn resample_interpolate_kernel_matches_cpu_reference() {
+    let Some(mut ctx) = gpu_or_skip("resample_interpolate") else {
+        return;
+    };
+    let seed = fresh_seed("GPU_TEST_SEED");
+    eprintln!("resample_interpolate: seed {seed} (GPU_TEST_SEED={seed} replays it)");
+    let mut rng = SimRng::new(seed, 6);
+    let mesh = SphereMesh::fibonacci(N, 0.3, seed, 6370.0).expect("mesh");
+    let RandomPlates {
+        crust,
+        table,
+        pairs,
+        suture_of_sample,
+        suture_target,
+    } = random_plates(&mesh, &mut rng, 0.05);
+    let rules = OverlapRules {
+        pairs: &pairs,
+        suture_of_sample: &suture_of_sample,
+        suture_target: &suture_target,
+    };
+    let mut sources = Vec::new();
+    resample_locate_cpu(&mesh, &crust, &table, &rules, &mut sources);
+    // Plates 0 and 1 move alike for the interpolation (same rotation), so the vertices of one
+    // count for the other (the frame-group rule).
+    let mut table = table;
+    let m = table.plates[0].world_from_plate;
+    table.plates[1].world_from_plate = m;
+    let mut cpu = Crust::default();
+    resample_interpolate_cpu(&mesh, &crust, &table, &sources, &mut cpu);
+    // The output starts as garbage of the wrong size: everything must come from the device.
+    let mut gpu = random_crust(7, &mut rng);
+    resample_interpolate_gpu(&mut ctx, &mesh, &crust, &table, &sources, &mut gpu).expect("kernel");
+    assert_eq!(gpu.len(), N);
+    let gaps = sources.iter().filter(|s| s.is_gap()).count();
+    let mixed = (0..N)
+        .filter(|&j| {
+            let s = &sources[j];
+            !s.is_gap() && {
+                let t = mesh.triangles[s.triangle as usize];
+                let c = |k: usize| crust.crust_type[t[k] as usize];
+                c(0) != c(1) || c(1) != c(2)
+            }
+        })
+        .count();
+    // Samples whose triangle has a vertex of another plate (the validity rule and the
+    // renormalisation of the weights act there).
+    let across = (0..N)
+        .filter(|&j| {
+            let s = &sources[j];
+            !s.is_gap() && {
+                let t = mesh.triangles[s.triangle as usize];
+                let id = table.plates[s.slot as usize].id;
+                t.iter().any(|&v| crust.plate[v as usize] != id)
+            }
+        })
+        .count();
+    assert!(
+        gaps > 0 && mixed > N / 1000 && across > N / 1000,
+        "seed {seed}: configuration too tame ({gaps} gaps, {mixed} coastal, {across} across)"
+    );
+    // Tolerances: crust type, orogeny and plate identical except where the f32 vote or the
+    // dominant corner sits at a tie (at most 0.1% of the samples); elsewhere every scalar within
+    // 1e-5·(1 + |value|) and every direction component within 1e-5·(1 + |component|) (f32 sums
+    // of three weighted values and an f32 rotation, against f64 on the CPU); gaps identical.
+    let mut flips = 0;
+    let (mut max_s, mut max_d) = (0.0f64, 0.0f64);
+    for j in 0..N {
+        if (gpu.crust_type[j], gpu.orogeny[j], gpu.plate[j])
+            != (cpu.crust_type[j], cpu.orogeny[j], cpu.plate[j])
+        {
+            flips += 1;
+            continue;
+        }
+        let scalars = [
+            (gpu.elevation_km[j], cpu.elevation_km[j]),
+            (gpu.thickness_km[j], cpu.thickness_km[j]),
+            (gpu.age_my[j], cpu.age_my[j]),
+            (gpu.orogeny_age_my[j], cpu.orogeny_age_my[j]),
+        ];
+        for (g, c) in scalars {
+            let e = (g as f64 - c as f64).abs() / (1.0 + (c as f64).abs());
+            max_s = max_s.max(e);
+            assert!(e <= 1e-5, "seed {seed}: sample {j}: gpu {g} cpu {c}");
+        }
+        for (g, c) in [
+            (gpu.ridge_dir[j], cpu.ridge_dir[j]),
+            (gpu.fold_dir[j], cpu.fold_dir[j]),
+        ] {
+            for k in 0..3 {
+                let e = (g[k] as f64 - c[k] as f64).abs() / (1.0 + (c[k] as f64).abs());
+                max_d = max_d.max(e);
+                assert!(e <= 1e-5, "seed {seed}: sample {j}: gpu {g:?} cpu {c:?}");
+            }
+        }
+        if sources[j].is_gap() {
+            assert_eq!(gpu.elevation_km[j].to_bits(), 0, "seed {seed}: gap {j}");
+        }
+    }
+    eprintln!(
+        "resample_interpolate: {gaps} gaps, {mixed} coastal, {across} across plates, {flips} \
+         flips, scalars within {max_s:e}, directions within {max_d:e} (relative to 1 + |value|)"
+    );
+    assert!(flips * 1000 <= N, "seed {seed}: {flips} samples differ");
 }
 
 /// Area-weighted agreement of the land masks and RMS elevation difference, metres.

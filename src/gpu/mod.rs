@@ -28,6 +28,7 @@ pub mod aging;
 pub mod amplify;
 pub mod collision_uplift;
 pub mod erosion;
+pub mod resample_interpolate;
 pub mod resample_locate;
 pub mod subduction_uplift;
 
@@ -174,6 +175,7 @@ pub struct GpuContext {
     pub(crate) uplift: subduction_uplift::UpliftKernel,
     pub(crate) locate: resample_locate::LocateKernel,
     pub(crate) collision: collision_uplift::CollisionKernel,
+    pub(crate) interpolate: resample_interpolate::InterpolateKernel,
     crust: Option<CrustBuffers>,
     crust_synced: Option<Tick>,
     staging: Option<wgpu::Buffer>,
@@ -294,6 +296,7 @@ impl GpuContext {
         let uplift = subduction_uplift::UpliftKernel::new(&device);
         let locate = resample_locate::LocateKernel::new(&device);
         let collision = collision_uplift::CollisionKernel::new(&device);
+        let interpolate = resample_interpolate::InterpolateKernel::new(&device);
         let ctx = Self {
             device,
             queue,
@@ -304,6 +307,7 @@ impl GpuContext {
             uplift,
             locate,
             collision,
+            interpolate,
             crust: None,
             crust_synced: None,
             staging: None,

@@ -1128,6 +1128,10 @@ fn bench(a: BenchArgs) -> Result<()> {
             "{:<28} {:>10} on the GPU",
             "collision surges", t.collision_surges
         );
+        println!(
+            "{:<28} {:>10} on the GPU",
+            "interpolations", t.interpolations
+        );
     }
     println!(
         "{:<28} {:>10.1} ms  ({} rifts of the largest plate into 2)",

@@ -794,6 +794,7 @@ fn fifty_steps_on_gpu_match_fifty_steps_on_cpu() {
     // Every resampling located its samples on the device, most of them there.
     assert!(resamplings > 0);
     assert_eq!(traffic.locations, resamplings, "{traffic:?}");
+    assert_eq!(traffic.interpolations, resamplings, "{traffic:?}");
     assert!(
         traffic.rechecked_samples * 20 <= resamplings * 30_000,
         "{traffic:?}"

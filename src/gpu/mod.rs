@@ -139,6 +139,8 @@ pub struct GpuTraffic {
     pub rechecked_samples: u64,
     /// Collision surges applied on the device.
     pub collision_surges: u64,
+    /// Resamplings whose interpolation ran on the device.
+    pub interpolations: u64,
 }
 
 /// The crust fields resident on the device (see the module documentation).

@@ -284,5 +284,6 @@ pub fn resample_interpolate_gpu(
     }
     next.plate
         .copy_from_slice(&out[10 * n + 2 * nw..11 * n + 2 * nw]);
+    ctx.traffic.interpolations += 1;
     Ok(())
 }

@@ -997,7 +997,21 @@ pub fn resample_interpolate(
         s.total += pending.len() as u64;
         s.applied = pending.into_iter().zip(moved).collect();
     }
-    interpolate(&mesh, &crust, &table, &work.sources, &mut work.next);
+    let interpolated_on_gpu = gpu.as_mut().is_some_and(|g| {
+        run_or_record(g, |g| {
+            crate::gpu::resample_interpolate::resample_interpolate_gpu(
+                g,
+                &mesh,
+                &crust,
+                &table,
+                &work.sources,
+                &mut work.next,
+            )
+        })
+    });
+    if !interpolated_on_gpu {
+        interpolate(&mesh, &crust, &table, &work.sources, &mut work.next);
+    }
     displace_overridden_continents(&mesh, &params, &work.sources, &mut work.next);
     lap("interpolate", &mut t);
     work.gaps = gaps_from_nearest(&mesh, &work.sources, &mut work.next);

@@ -717,7 +717,7 @@ fn resample_interpolate_kernel_matches_cpu_reference() {
     // of three weighted values and an f32 rotation, against f64 on the CPU); gaps identical.
     let mut flips = 0;
     let (mut max_s, mut max_d) = (0.0f64, 0.0f64);
-    for j in 0..N {
+    for (j, src) in sources.iter().enumerate() {
         if (gpu.crust_type[j], gpu.orogeny[j], gpu.plate[j])
             != (cpu.crust_type[j], cpu.orogeny[j], cpu.plate[j])
         {
@@ -745,7 +745,7 @@ fn resample_interpolate_kernel_matches_cpu_reference() {
                 assert!(e <= 1e-5, "seed {seed}: sample {j}: gpu {g:?} cpu {c:?}");
             }
         }
-        if sources[j].is_gap() {
+        if src.is_gap() {
             assert_eq!(gpu.elevation_km[j].to_bits(), 0, "seed {seed}: gap {j}");
         }
     }

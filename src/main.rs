@@ -1119,6 +1119,13 @@ fn bench(a: BenchArgs) -> Result<()> {
             .median_ms("resample_locate")
             .unwrap_or(f64::NAN)
     );
+    println!(
+        "{:<28} {:>10.1} ms",
+        "  of which interp (median)",
+        sim.timings()
+            .median_ms("resample_interpolate")
+            .unwrap_or(f64::NAN)
+    );
     if let Some(t) = gpu_traffic(&sim) {
         println!(
             "{:<28} {:>10} on the GPU, {} samples left to the CPU",

@@ -18,6 +18,9 @@
 //!   locator on the device for the whole run; per resampling it uploads the plate table and the
 //!   old crust's plates and crust types, and reads back one located source per sample.
 //!
+//! - The resampling's interpolation ([`resample_interpolate`]) keeps the positions and
+//!   triangles on the device; per resampling it uploads the located sources, the plate table and
+//!   the old crust, and reads back the new crust (CPU systems edit it next).
 //! - The collision surges after a resampling ([`collision_uplift`]) keep the reference
 //!   positions on the device for the run; per surge they upload the distances to the sutured
 //!   terrane (found on the CPU by a graph search), and the fields they write are read back once.

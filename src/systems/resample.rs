@@ -919,7 +919,7 @@ pub fn resample_interpolate(
     mut sutures: Option<ResMut<Sutures>>,
     mut work: ResMut<ResampleWork>,
     mut gpu: Option<ResMut<GpuContext>>,
-    timings: Option<ResMut<StepTimings>>,
+    mut timings: Option<ResMut<StepTimings>>,
 ) {
     let started = Instant::now();
     let table = PlateTable::from_query(&plates);
@@ -971,7 +971,7 @@ pub fn resample_interpolate(
     if !on_gpu {
         resample_locate_cpu(&mesh, &crust, &table, &rules, &mut work.sources);
     }
-    if let Some(mut timings) = timings {
+    if let Some(timings) = timings.as_mut() {
         timings.record("resample_locate", t.elapsed());
     }
     lap("locate", &mut t);
@@ -1011,6 +1011,9 @@ pub fn resample_interpolate(
     });
     if !interpolated_on_gpu {
         interpolate(&mesh, &crust, &table, &work.sources, &mut work.next);
+    }
+    if let Some(timings) = timings.as_mut() {
+        timings.record("resample_interpolate", t.elapsed());
     }
     displace_overridden_continents(&mesh, &params, &work.sources, &mut work.next);
     lap("interpolate", &mut t);

@@ -333,6 +333,11 @@ fn collision_uplift_kernel_matches_cpu_reference() {
         })
         .collect();
     ctx.sync_crust(&crust, None).expect("upload");
+    // Bad input is an error, not a panic or an out-of-bounds read on the device.
+    let err = collision_uplift_gpu(&mut ctx, &positions[..10], &surges).unwrap_err();
+    assert!(err.to_string().contains("positions"), "{err}");
+    let short = vec![(surges[0].0, vec![0.0f32; 5])];
+    assert!(collision_uplift_gpu(&mut ctx, &positions, &short).is_err());
     collision_uplift_gpu(&mut ctx, &positions, &surges).expect("dispatch");
     // Poisoned host copy: every field the kernel writes must come back from the device.
     let mut gpu = crust.clone();
@@ -682,6 +687,17 @@ fn resample_interpolate_kernel_matches_cpu_reference() {
     resample_interpolate_cpu(&mesh, &crust, &table, &sources, &mut cpu);
     // The output starts as garbage of the wrong size: everything must come from the device.
     let mut gpu = random_crust(7, &mut rng);
+    // Bad input is an error, not a panic or an out-of-bounds read on the device.
+    assert!(
+        resample_interpolate_gpu(&mut ctx, &mesh, &crust, &table, &sources[..5], &mut gpu).is_err()
+    );
+    let mut bad = sources.clone();
+    if let Some(s) = bad.iter_mut().find(|s| !s.is_gap()) {
+        s.triangle = u32::MAX;
+    }
+    let err =
+        resample_interpolate_gpu(&mut ctx, &mesh, &crust, &table, &bad, &mut gpu).unwrap_err();
+    assert!(err.to_string().contains("out of range"), "{err}");
     resample_interpolate_gpu(&mut ctx, &mesh, &crust, &table, &sources, &mut gpu).expect("kernel");
     assert_eq!(gpu.len(), N);
     let gaps = sources.iter().filter(|s| s.is_gap()).count();

@@ -1119,10 +1119,25 @@ fn bench(a: BenchArgs) -> Result<()> {
             .median_ms("resample_locate")
             .unwrap_or(f64::NAN)
     );
+    println!(
+        "{:<28} {:>10.1} ms",
+        "  of which interp (median)",
+        sim.timings()
+            .median_ms("resample_interpolate")
+            .unwrap_or(f64::NAN)
+    );
     if let Some(t) = gpu_traffic(&sim) {
         println!(
             "{:<28} {:>10} on the GPU, {} samples left to the CPU",
             "point locations", t.locations, t.rechecked_samples
+        );
+        println!(
+            "{:<28} {:>10} on the GPU",
+            "collision surges", t.collision_surges
+        );
+        println!(
+            "{:<28} {:>10} on the GPU",
+            "interpolations", t.interpolations
         );
     }
     println!(

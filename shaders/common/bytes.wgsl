@@ -19,6 +19,7 @@ const CRUST_CONTINENTAL: u32 = 1u;
 // Orogeny codes (src/resources/crust.rs, Orogeny).
 const OROGENY_NONE: u32 = 0u;
 const OROGENY_ANDEAN: u32 = 1u;
+const OROGENY_HIMALAYAN: u32 = 2u;
 // "No front point" in the convergence field (src/resources/convergence.rs, NONE).
 const NO_POINT: u32 = 0xffffffffu;
 // Threads per workgroup of every per-sample kernel (src/gpu/mod.rs, WORKGROUP_SIZE).

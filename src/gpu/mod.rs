@@ -18,11 +18,20 @@
 //!   locator on the device for the whole run; per resampling it uploads the plate table and the
 //!   old crust's plates and crust types, and reads back one located source per sample.
 //!
+//! - The resampling's interpolation ([`resample_interpolate`]) keeps the positions and
+//!   triangles on the device; per resampling it uploads the located sources, the plate table and
+//!   the old crust, and reads back the new crust (CPU systems edit it next).
+//! - The collision surges after a resampling ([`collision_uplift`]) keep the reference
+//!   positions on the device for the run; per surge they upload the distances to the sutured
+//!   terrane (found on the CPU by a graph search), and the fields they write are read back once.
+//!
 //! [`GpuTraffic`] counts the bytes both ways; `planet bench --backend gpu` prints them per step.
 
 pub mod aging;
 pub mod amplify;
+pub mod collision_uplift;
 pub mod erosion;
+pub mod resample_interpolate;
 pub mod resample_locate;
 pub mod subduction_uplift;
 
@@ -131,6 +140,10 @@ pub struct GpuTraffic {
     pub locations: u64,
     /// Samples of those locations that the kernel left to the CPU (near an edge or a tie).
     pub rechecked_samples: u64,
+    /// Collision surges applied on the device.
+    pub collision_surges: u64,
+    /// Resamplings whose interpolation ran on the device.
+    pub interpolations: u64,
 }
 
 /// The crust fields resident on the device (see the module documentation).
@@ -166,6 +179,8 @@ pub struct GpuContext {
     pub(crate) aging: aging::AgingKernel,
     pub(crate) uplift: subduction_uplift::UpliftKernel,
     pub(crate) locate: resample_locate::LocateKernel,
+    pub(crate) collision: collision_uplift::CollisionKernel,
+    pub(crate) interpolate: resample_interpolate::InterpolateKernel,
     crust: Option<CrustBuffers>,
     crust_synced: Option<Tick>,
     staging: Option<wgpu::Buffer>,
@@ -285,6 +300,8 @@ impl GpuContext {
         let aging = aging::AgingKernel::new(&device);
         let uplift = subduction_uplift::UpliftKernel::new(&device);
         let locate = resample_locate::LocateKernel::new(&device);
+        let collision = collision_uplift::CollisionKernel::new(&device);
+        let interpolate = resample_interpolate::InterpolateKernel::new(&device);
         let ctx = Self {
             device,
             queue,
@@ -294,6 +311,8 @@ impl GpuContext {
             aging,
             uplift,
             locate,
+            collision,
+            interpolate,
             crust: None,
             crust_synced: None,
             staging: None,
@@ -463,6 +482,7 @@ impl GpuContext {
             self.erosion.forget_bind_group();
             self.aging.forget_bind_group();
             self.uplift.forget_bind_groups();
+            self.collision.forget_bind_group();
         }
         let Some(b) = self.crust.take() else {
             return Err(GpuError::Kernel {

@@ -272,6 +272,16 @@ pub fn subduction_uplift_dispatch(
 /// Reads the fields the kernel writes (elevation, orogeny, orogeny age, fold direction) back
 /// into `crust`.
 pub fn read_back(ctx: &mut GpuContext, crust: &mut Crust) -> Result<(), GpuError> {
+    read_back_fields(ctx, KERNEL, crust)
+}
+
+/// Reads elevation, orogeny, orogeny age and fold direction of the resident crust into
+/// `crust`; errors name `kernel`, the kernel that wrote them.
+pub(crate) fn read_back_fields(
+    ctx: &mut GpuContext,
+    kernel: &'static str,
+    crust: &mut Crust,
+) -> Result<(), GpuError> {
     let Some((z, og, oga, fold)) = ctx.crust_buffers().map(|b| {
         (
             b.elevation_km.clone(),
@@ -281,24 +291,24 @@ pub fn read_back(ctx: &mut GpuContext, crust: &mut Crust) -> Result<(), GpuError
         )
     }) else {
         return Err(GpuError::Kernel {
-            kernel: KERNEL,
+            kernel,
             message: "the crust is not on the device".into(),
         });
     };
     ctx.download(
-        KERNEL,
+        kernel,
         &z,
         bytemuck::cast_slice_mut(&mut crust.elevation_km),
     )?;
     ctx.download(
-        KERNEL,
+        kernel,
         &oga,
         bytemuck::cast_slice_mut(&mut crust.orogeny_age_my),
     )?;
-    ctx.download(KERNEL, &fold, bytemuck::cast_slice_mut(&mut crust.fold_dir))?;
+    ctx.download(kernel, &fold, bytemuck::cast_slice_mut(&mut crust.fold_dir))?;
     let mut scratch = std::mem::take(&mut ctx.uplift.orogeny_scratch);
     scratch.resize(crust.len(), 0);
-    let r = ctx.download(KERNEL, &og, &mut scratch);
+    let r = ctx.download(kernel, &og, &mut scratch);
     let mut bad = None;
     if r.is_ok() {
         for (i, (o, &b)) in crust.orogeny.iter_mut().zip(&scratch).enumerate() {
@@ -317,7 +327,7 @@ pub fn read_back(ctx: &mut GpuContext, crust: &mut Crust) -> Result<(), GpuError
     r?;
     if let Some((i, b)) = bad {
         return Err(GpuError::Kernel {
-            kernel: KERNEL,
+            kernel,
             message: format!("orogeny code {b} at sample {i}"),
         });
     }

@@ -989,7 +989,12 @@ pub fn collision_uplift(world: &mut World) {
         return;
     }
     let params = world.resource::<Params>().clone();
+    let crust_tick = world.get_resource_ref::<Crust>().map(|c| c.last_changed());
     let mut crust = world.remove_resource::<Crust>().unwrap_or_default();
+    // On the GPU backend the surges are applied on the device after every distance is known
+    // (the distances depend only on the plates, which the surges do not change).
+    let mut gpu = world.remove_resource::<GpuContext>();
+    let mut surges = Vec::new();
     let mesh = world.resource::<SphereMesh>();
     let r_km = params.planet.radius_km;
     let c = &params.collision;
@@ -1025,31 +1030,16 @@ pub fn collision_uplift(world: &mut World) {
             &mut label,
             &mut settled,
         );
-        let q = suture.centroid_world;
-        for i in 0..mesh.len() {
-            if !dist[i].is_finite() {
-                continue;
-            }
-            let d = if r > 0.0 {
-                dist[i] as f64 * r_km / r
-            } else {
-                0.0
-            };
-            let dz = peak * (1.0 - d * d).max(0.0).powi(2);
-            if dz <= 0.0 || crust.crust_type[i] != CrustType::Continental {
-                continue;
-            }
-            crust.elevation_km[i] = (crust.elevation_km[i] as f64 + dz).min(z_c) as f32;
-            if dz > 1e-3 && crust.crust_type[i] == CrustType::Continental {
-                crust.orogeny[i] = Orogeny::Himalayan;
-                crust.orogeny_age_my[i] = 0.0;
-                let p = mesh.positions[i];
-                let away = p - q;
-                let f = (away - p * p.dot(away))
-                    .try_normalize()
-                    .unwrap_or(DVec3::ZERO);
-                crust.fold_dir[i] = [f.x as f32, f.y as f32, f.z as f32];
-            }
+        let surge = CollisionSurge {
+            radius_km: r,
+            peak_km: peak,
+            planet_radius_km: r_km,
+            max_elevation_km: z_c,
+            centroid: suture.centroid_world,
+        };
+        match gpu {
+            Some(_) => surges.push((surge, dist.clone())),
+            None => collision_uplift_cpu(&surge, &mesh.positions, &dist, &mut crust),
         }
         tracing::debug!(
             terrane = suture.terrane,
@@ -1061,5 +1051,86 @@ pub fn collision_uplift(world: &mut World) {
             "collision"
         );
     }
+    let mut synced = false;
+    if let Some(g) = gpu.as_mut().filter(|_| !surges.is_empty()) {
+        let done = run_or_record(g, |g| {
+            g.sync_crust(&crust, crust_tick)?;
+            crate::gpu::collision_uplift::collision_uplift_gpu(g, &mesh.positions, &surges)?;
+            crate::gpu::collision_uplift::read_back(g, &mut crust)
+        });
+        synced = done;
+        if !done {
+            for (surge, dist) in &surges {
+                collision_uplift_cpu(surge, &mesh.positions, dist, &mut crust);
+            }
+        }
+    }
     world.insert_resource(crust);
+    if let Some(mut g) = gpu {
+        if synced {
+            g.mark_crust_synced(world.resource_ref::<Crust>().last_changed());
+        }
+        world.insert_resource(g);
+    }
+}
+
+/// One sutured terrane's collision surge (see the module documentation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CollisionSurge {
+    /// r: radius of the surge, km.
+    pub radius_km: f64,
+    /// Δz₀: uplift at the terrane, km.
+    pub peak_km: f64,
+    /// Planet radius, km.
+    pub planet_radius_km: f64,
+    /// z_c: elevations are capped here, km.
+    pub max_elevation_km: f64,
+    /// The terrane's centroid (world frame, unit vector); fold directions point away from it.
+    pub centroid: DVec3,
+}
+
+/// The CPU kernel (reference of `shaders/collision_uplift.wgsl`): one collision surge on every
+/// sample, in place. `dist` is each sample's great-circle distance (radians) to the sutured
+/// terrane through its new plate, infinite where the surge does not reach; `positions` are the
+/// reference positions. Continental samples rise by Δz₀·(1 − (d/r)²)² (capped at z_c); where
+/// the rise exceeds 1 m they get Himalayan orogeny, orogeny age 0 and a fold direction pointing
+/// away from the centroid. `positions` and `dist` must have one entry per sample of `crust`.
+pub fn collision_uplift_cpu(
+    s: &CollisionSurge,
+    positions: &[DVec3],
+    dist: &[f32],
+    crust: &mut Crust,
+) {
+    let (r, peak, r_km, z_c, q) = (
+        s.radius_km,
+        s.peak_km,
+        s.planet_radius_km,
+        s.max_elevation_km,
+        s.centroid,
+    );
+    for i in 0..positions.len().min(dist.len()).min(crust.len()) {
+        if !dist[i].is_finite() {
+            continue;
+        }
+        let d = if r > 0.0 {
+            dist[i] as f64 * r_km / r
+        } else {
+            0.0
+        };
+        let dz = peak * (1.0 - d * d).max(0.0).powi(2);
+        if dz <= 0.0 || crust.crust_type[i] != CrustType::Continental {
+            continue;
+        }
+        crust.elevation_km[i] = (crust.elevation_km[i] as f64 + dz).min(z_c) as f32;
+        if dz > 1e-3 && crust.crust_type[i] == CrustType::Continental {
+            crust.orogeny[i] = Orogeny::Himalayan;
+            crust.orogeny_age_my[i] = 0.0;
+            let p = positions[i];
+            let away = p - q;
+            let f = (away - p * p.dot(away))
+                .try_normalize()
+                .unwrap_or(DVec3::ZERO);
+            crust.fold_dir[i] = [f.x as f32, f.y as f32, f.z as f32];
+        }
+    }
 }

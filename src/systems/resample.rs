@@ -919,7 +919,7 @@ pub fn resample_interpolate(
     mut sutures: Option<ResMut<Sutures>>,
     mut work: ResMut<ResampleWork>,
     mut gpu: Option<ResMut<GpuContext>>,
-    timings: Option<ResMut<StepTimings>>,
+    mut timings: Option<ResMut<StepTimings>>,
 ) {
     let started = Instant::now();
     let table = PlateTable::from_query(&plates);
@@ -971,7 +971,7 @@ pub fn resample_interpolate(
     if !on_gpu {
         resample_locate_cpu(&mesh, &crust, &table, &rules, &mut work.sources);
     }
-    if let Some(mut timings) = timings {
+    if let Some(timings) = timings.as_mut() {
         timings.record("resample_locate", t.elapsed());
     }
     lap("locate", &mut t);
@@ -997,7 +997,24 @@ pub fn resample_interpolate(
         s.total += pending.len() as u64;
         s.applied = pending.into_iter().zip(moved).collect();
     }
-    interpolate(&mesh, &crust, &table, &work.sources, &mut work.next);
+    let interpolated_on_gpu = gpu.as_mut().is_some_and(|g| {
+        run_or_record(g, |g| {
+            crate::gpu::resample_interpolate::resample_interpolate_gpu(
+                g,
+                &mesh,
+                &crust,
+                &table,
+                &work.sources,
+                &mut work.next,
+            )
+        })
+    });
+    if !interpolated_on_gpu {
+        interpolate(&mesh, &crust, &table, &work.sources, &mut work.next);
+    }
+    if let Some(timings) = timings.as_mut() {
+        timings.record("resample_interpolate", t.elapsed());
+    }
     displace_overridden_continents(&mesh, &params, &work.sources, &mut work.next);
     lap("interpolate", &mut t);
     work.gaps = gaps_from_nearest(&mesh, &work.sources, &mut work.next);

@@ -1,0 +1,204 @@
+//! Host side of `shaders/collision_uplift.wgsl`: the collision surge around each sutured
+//! terrane (uplift of continental crust, Himalayan orogeny, fold directions away from the
+//! terrane) on the resident crust buffers. The CPU reference is [`collision_uplift_cpu`] (the
+//! function the CPU backend runs, in `src/systems/convergence.rs`).
+//!
+//! The distance of each sample to the terrane (a graph search through the terrane's new plate,
+//! `propagate_nearest`) stays on the CPU; per surge, the distances go up (4 bytes a sample) with
+//! the uniforms, and the reference positions go up once per mesh (12 bytes a sample). The
+//! surges of one resampling run one after the other on the device, in the CPU's order, and the
+//! fields they write are read back once at the end.
+
+use glam::DVec3;
+
+use crate::gpu::{GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer};
+use crate::resources::Crust;
+pub use crate::systems::convergence::{CollisionSurge, collision_uplift_cpu};
+
+/// The kernel's WGSL.
+pub const WGSL: &str = include_str!("../../shaders/collision_uplift.wgsl");
+
+const KERNEL: &str = "collision_uplift";
+
+/// Uniforms of one surge. Keep in sync with `CollisionUniforms` in
+/// shaders/collision_uplift.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct CollisionUniforms {
+    /// Terrane centroid, x (world frame).
+    pub centroid_x: f32,
+    /// Terrane centroid, y.
+    pub centroid_y: f32,
+    /// Terrane centroid, z.
+    pub centroid_z: f32,
+    /// Δz₀, km.
+    pub peak_km: f32,
+    /// Planet radius over r (turns a distance in radians into d/r); 0 when r = 0.
+    pub dist_scale: f32,
+    /// z_c, km.
+    pub max_elevation_km: f32,
+    /// Samples.
+    pub count: u32,
+    /// Threads (words of four samples) per dispatch row.
+    pub row_stride: u32,
+}
+
+impl CollisionUniforms {
+    /// The uniforms for surge `s` over `count` samples.
+    pub fn new(s: &CollisionSurge, count: u32) -> Self {
+        Self {
+            centroid_x: s.centroid.x as f32,
+            centroid_y: s.centroid.y as f32,
+            centroid_z: s.centroid.z as f32,
+            peak_km: s.peak_km as f32,
+            dist_scale: if s.radius_km > 0.0 {
+                (s.planet_radius_km / s.radius_km) as f32
+            } else {
+                0.0
+            },
+            max_elevation_km: s.max_elevation_km as f32,
+            count,
+            row_stride: ROW_STRIDE,
+        }
+    }
+}
+
+/// Pipeline and buffers of the kernel.
+pub(crate) struct CollisionKernel {
+    pipeline: wgpu::ComputePipeline,
+    uniforms: wgpu::Buffer,
+    /// Reference positions (f32) and the mesh they belong to: sample count and the bits of
+    /// the first and last positions.
+    positions: Option<(wgpu::Buffer, (usize, [u64; 2]))>,
+    /// Distances of one surge and their length in samples.
+    dist: Option<(wgpu::Buffer, usize)>,
+    bind_group: Option<wgpu::BindGroup>,
+}
+
+impl CollisionKernel {
+    pub(crate) fn new(device: &wgpu::Device) -> Self {
+        Self {
+            pipeline: compute_pipeline(device, KERNEL, WGSL),
+            uniforms: uniform_buffer(
+                device,
+                "collision_uplift uniforms",
+                std::mem::size_of::<CollisionUniforms>(),
+            ),
+            positions: None,
+            dist: None,
+            bind_group: None,
+        }
+    }
+    pub(crate) fn forget_bind_group(&mut self) {
+        self.bind_group = None;
+    }
+}
+
+fn mesh_key(positions: &[DVec3]) -> (usize, [u64; 2]) {
+    let bits = |p: Option<&DVec3>| p.map_or(0, |p| p.x.to_bits() ^ p.y.to_bits().rotate_left(21));
+    (
+        positions.len(),
+        [bits(positions.first()), bits(positions.last())],
+    )
+}
+
+fn fail(message: String) -> GpuError {
+    GpuError::Kernel {
+        kernel: KERNEL,
+        message,
+    }
+}
+
+/// Applies the surges in order on the resident crust buffers (call
+/// [`GpuContext::sync_crust`] first). Each surge comes with its distances (radians, one per
+/// sample, infinite where it does not reach); `positions` are the reference positions. Read the
+/// result with [`read_back`].
+pub fn collision_uplift_gpu(
+    ctx: &mut GpuContext,
+    positions: &[DVec3],
+    surges: &[(CollisionSurge, Vec<f32>)],
+) -> Result<(), GpuError> {
+    let Some(n) = ctx.crust_buffers().map(|b| b.len) else {
+        return Err(fail("the crust is not on the device".into()));
+    };
+    if positions.len() != n {
+        return Err(fail(format!(
+            "{} positions for a crust of {n} samples",
+            positions.len()
+        )));
+    }
+    if let Some((_, d)) = surges.iter().find(|(_, d)| d.len() != n) {
+        return Err(fail(format!(
+            "{} distances for a crust of {n} samples",
+            d.len()
+        )));
+    }
+    if surges.is_empty() {
+        return Ok(());
+    }
+    let key = mesh_key(positions);
+    if ctx.collision.positions.as_ref().is_none_or(|p| p.1 != key) {
+        let flat: Vec<f32> = positions
+            .iter()
+            .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+            .collect();
+        let buf = ctx.storage_buffer("collision_uplift positions", 4 * flat.len());
+        ctx.upload(&buf, bytemuck::cast_slice(&flat));
+        ctx.collision.positions = Some((buf, key));
+        ctx.collision.bind_group = None;
+    }
+    if ctx.collision.dist.as_ref().is_none_or(|d| d.1 != n) {
+        let buf = ctx.storage_buffer("collision_uplift distances", 4 * n);
+        ctx.collision.dist = Some((buf, n));
+        ctx.collision.bind_group = None;
+    }
+    if ctx.collision.bind_group.is_none() {
+        let (Some(b), Some((pb, _)), Some((db, _))) = (
+            ctx.crust_buffers(),
+            ctx.collision.positions.as_ref(),
+            ctx.collision.dist.as_ref(),
+        ) else {
+            return Err(fail("buffers missing".into()));
+        };
+        let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("collision_uplift bindings"),
+            layout: &ctx.collision.pipeline.get_bind_group_layout(0),
+            entries: &[
+                entry(0, &ctx.collision.uniforms),
+                entry(1, &b.elevation_km),
+                entry(2, &b.orogeny),
+                entry(3, &b.orogeny_age_my),
+                entry(4, &b.fold_dir),
+                entry(5, &b.crust_type),
+                entry(6, pb),
+                entry(7, db),
+            ],
+        });
+        ctx.collision.bind_group = Some(bg);
+    }
+    let (pipeline, uniforms) = (
+        ctx.collision.pipeline.clone(),
+        ctx.collision.uniforms.clone(),
+    );
+    let (Some(bg), Some((dist, _))) =
+        (ctx.collision.bind_group.clone(), ctx.collision.dist.clone())
+    else {
+        return Err(fail("buffers missing".into()));
+    };
+    // Writes to the distances and uniforms are ordered before the next submission, so one
+    // buffer of each serves every surge.
+    for (s, d) in surges {
+        let u = CollisionUniforms::new(s, n as u32);
+        ctx.upload(&uniforms, bytemuck::bytes_of(&u));
+        ctx.upload(&dist, bytemuck::cast_slice(d));
+        ctx.dispatch(KERNEL, &pipeline, &bg, (n as u32).div_ceil(4))?;
+        ctx.traffic.collision_surges += 1;
+    }
+    Ok(())
+}
+
+/// Reads the fields the kernel writes (elevation, orogeny, orogeny age, fold direction) back
+/// into `crust`.
+pub fn read_back(ctx: &mut GpuContext, crust: &mut Crust) -> Result<(), GpuError> {
+    crate::gpu::subduction_uplift::read_back_fields(ctx, KERNEL, crust)
+}

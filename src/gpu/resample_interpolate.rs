@@ -1,0 +1,289 @@
+//! Host side of `shaders/resample_interpolate.wgsl`: the interpolation of a resampling (every
+//! field of the old crust at each sample's located source into the new crust). The CPU
+//! reference is [`resample_interpolate_cpu`] (`interpolate` in `src/systems/resample.rs`, the
+//! function the CPU backend runs).
+//!
+//! What crosses the bus: once per mesh, the reference positions and triangles (about 36 bytes a
+//! sample); per resampling, the located sources (32 bytes a sample), the plate table (64 bytes a
+//! plate), the old crust with the frame group of each sample's plate (46 bytes a sample); back,
+//! the new crust (46 bytes a sample). Which plates moved exactly alike (the CPU compares their
+//! f64 rotations) is decided on the host: each plate gets the slot of the first plate with the
+//! same rotation as its frame group, and the kernel compares groups.
+//!
+//! The gaps (samples no plate covers), their nearest plates (a graph search from the covered
+//! samples, not per sample) and the gap filling stay on the CPU.
+
+use glam::DVec3;
+
+use crate::geometry::SphereMesh;
+use crate::gpu::{GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer};
+use crate::resources::{Crust, CrustType, Orogeny, PlateTable};
+pub use crate::systems::resample::SampleSource;
+pub use crate::systems::resample::interpolate as resample_interpolate_cpu;
+
+/// The kernel's WGSL.
+pub const WGSL: &str = include_str!("../../shaders/resample_interpolate.wgsl");
+
+const KERNEL: &str = "resample_interpolate";
+
+/// Uniforms of one interpolation. Keep in sync with `InterpolateUniforms` in
+/// shaders/resample_interpolate.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct InterpolateUniforms {
+    /// Samples.
+    pub count: u32,
+    /// Threads (words of four samples) per dispatch row.
+    pub row_stride: u32,
+    /// Words of a packed u8 field: ceil(count / 4).
+    pub packed_words: u32,
+    /// Padding.
+    pub _pad: u32,
+}
+
+/// Pipeline and the resident mesh (positions and triangles).
+pub(crate) struct InterpolateKernel {
+    pipeline: wgpu::ComputePipeline,
+    uniforms: wgpu::Buffer,
+    mesh: Option<(wgpu::Buffer, (usize, usize, u64))>,
+}
+
+impl InterpolateKernel {
+    pub(crate) fn new(device: &wgpu::Device) -> Self {
+        Self {
+            pipeline: compute_pipeline(device, KERNEL, WGSL),
+            uniforms: uniform_buffer(
+                device,
+                "resample_interpolate uniforms",
+                std::mem::size_of::<InterpolateUniforms>(),
+            ),
+            mesh: None,
+        }
+    }
+}
+
+fn fail(message: String) -> GpuError {
+    GpuError::Kernel {
+        kernel: KERNEL,
+        message,
+    }
+}
+
+fn check_size(what: &str, bytes: usize, limit: u64) -> Result<(), GpuError> {
+    if bytes as u64 > limit {
+        return Err(GpuError::TooLarge(format!(
+            "{KERNEL}: {what} needs {bytes} bytes, more than the device's storage binding limit \
+             of {limit} bytes"
+        )));
+    }
+    Ok(())
+}
+
+/// The frame group of each slot: the first slot whose plate has exactly the same rotation
+/// (world ← plate), as the CPU's test `world_from_plate == world_from_plate`.
+fn frame_groups(table: &PlateTable) -> Vec<u32> {
+    (0..table.plates.len())
+        .map(|s| {
+            let m = table.plates[s].world_from_plate;
+            (0..=s)
+                .find(|&k| table.plates[k].world_from_plate == m)
+                .unwrap_or(s) as u32
+        })
+        .collect()
+}
+
+/// Interpolates every field of `old` at `sources` into `next` on the device: same semantics as
+/// [`resample_interpolate_cpu`], in f32 (see docs/gpu.md for the tolerances).
+pub fn resample_interpolate_gpu(
+    ctx: &mut GpuContext,
+    mesh: &SphereMesh,
+    old: &Crust,
+    table: &PlateTable,
+    sources: &[SampleSource],
+    next: &mut Crust,
+) -> Result<(), GpuError> {
+    let n = mesh.len();
+    if old.len() != n || sources.len() != n {
+        return Err(fail(format!(
+            "inputs of different sizes: mesh {n}, old crust {}, sources {}",
+            old.len(),
+            sources.len()
+        )));
+    }
+    if let Some((j, s)) = sources.iter().enumerate().find(|(_, s)| {
+        !s.is_gap()
+            && (s.slot as usize >= table.plates.len()
+                || s.triangle as usize >= mesh.triangles.len())
+    }) {
+        return Err(fail(format!(
+            "source of sample {j} out of range (slot {}, triangle {})",
+            s.slot, s.triangle
+        )));
+    }
+    if n == 0 {
+        next.resize(0);
+        return Ok(());
+    }
+    let nw = n.div_ceil(4);
+    let limit = ctx.device.limits().max_storage_buffer_binding_size;
+    let old_words = 11 * n + 2 * nw;
+    check_size("the old crust", 4 * old_words, limit)?;
+    check_size("the mesh", 12 * n + 12 * mesh.triangles.len(), limit)?;
+    check_size("the sources", 32 * n, limit)?;
+    // The mesh: once per mesh.
+    let key = (
+        n,
+        mesh.triangles.len(),
+        mesh.positions.first().map_or(0, |p: &DVec3| p.x.to_bits()),
+    );
+    if ctx.interpolate.mesh.as_ref().is_none_or(|m| m.1 != key) {
+        let mut words: Vec<u32> = Vec::with_capacity(3 * n + 3 * mesh.triangles.len());
+        words.extend(
+            mesh.positions
+                .iter()
+                .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32].map(f32::to_bits)),
+        );
+        words.extend_from_slice(bytemuck::cast_slice(&mesh.triangles));
+        let buf = ctx.storage_buffer("resample_interpolate mesh", 4 * words.len());
+        ctx.upload(&buf, bytemuck::cast_slice(&words));
+        ctx.interpolate.mesh = Some((buf, key));
+    }
+    // The plate table with frame groups.
+    let groups = frame_groups(table);
+    let mut plate_words: Vec<u32> = Vec::with_capacity(16 * table.plates.len().max(1));
+    for (s, p) in table.plates.iter().enumerate() {
+        let m = p.world_from_plate;
+        plate_words.extend_from_slice(&[groups[s], 0, 0, 0]);
+        for i in 0..3 {
+            let row = [m.x_axis[i], m.y_axis[i], m.z_axis[i]].map(|x| (x as f32).to_bits());
+            plate_words.extend_from_slice(&row);
+            plate_words.push(0);
+        }
+    }
+    if plate_words.is_empty() {
+        plate_words.resize(16, 0);
+    }
+    // The old crust, laid out as the kernel reads it.
+    let mut words: Vec<u32> = Vec::with_capacity(old_words);
+    for f in [
+        &old.elevation_km,
+        &old.thickness_km,
+        &old.age_my,
+        &old.orogeny_age_my,
+    ] {
+        words.extend(f.iter().map(|x| x.to_bits()));
+    }
+    for f in [&old.ridge_dir, &old.fold_dir] {
+        words.extend(f.iter().flatten().map(|x| x.to_bits()));
+    }
+    for bytes in [
+        bytemuck::cast_slice::<CrustType, u8>(&old.crust_type),
+        bytemuck::cast_slice::<Orogeny, u8>(&old.orogeny),
+    ] {
+        let mut padded = bytes.to_vec();
+        padded.resize(4 * nw, 0);
+        words.extend(
+            padded
+                .chunks_exact(4)
+                .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])),
+        );
+    }
+    words.extend(
+        old.plate
+            .iter()
+            .map(|&p| table.slot(p).map_or(u32::MAX, |s| groups[s])),
+    );
+    let source_words: Vec<u32> = sources
+        .iter()
+        .flat_map(|s| {
+            [
+                s.slot,
+                s.plate,
+                s.suture,
+                u32::from(s.continental_lost),
+                s.triangle,
+                s.weights[0].to_bits(),
+                s.weights[1].to_bits(),
+                s.weights[2].to_bits(),
+            ]
+        })
+        .collect();
+    let old_buf = ctx.storage_buffer("resample_interpolate old crust", 4 * words.len());
+    ctx.upload(&old_buf, bytemuck::cast_slice(&words));
+    let src_buf = ctx.storage_buffer("resample_interpolate sources", 4 * source_words.len());
+    ctx.upload(&src_buf, bytemuck::cast_slice(&source_words));
+    let plate_buf = ctx.storage_buffer("resample_interpolate plates", 4 * plate_words.len());
+    ctx.upload(&plate_buf, bytemuck::cast_slice(&plate_words));
+    let next_buf = ctx.storage_buffer("resample_interpolate next crust", 4 * old_words);
+    let Some((mesh_buf, _)) = ctx.interpolate.mesh.as_ref() else {
+        return Err(fail("the mesh is not on the device".into()));
+    };
+    let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("resample_interpolate bindings"),
+        layout: &ctx.interpolate.pipeline.get_bind_group_layout(0),
+        entries: &[
+            entry(0, &ctx.interpolate.uniforms),
+            entry(1, &src_buf),
+            entry(2, &plate_buf),
+            entry(3, mesh_buf),
+            entry(4, &old_buf),
+            entry(5, &next_buf),
+        ],
+    });
+    let u = InterpolateUniforms {
+        count: n as u32,
+        row_stride: ROW_STRIDE,
+        packed_words: nw as u32,
+        _pad: 0,
+    };
+    let (pipeline, uniforms) = (
+        ctx.interpolate.pipeline.clone(),
+        ctx.interpolate.uniforms.clone(),
+    );
+    ctx.upload(&uniforms, bytemuck::bytes_of(&u));
+    ctx.dispatch(KERNEL, &pipeline, &bind_group, nw as u32)?;
+    // Poisoned before the readback: a copy that does not happen cannot pass.
+    let mut out = vec![u32::MAX; old_words];
+    ctx.download(KERNEL, &next_buf, bytemuck::cast_slice_mut(&mut out))?;
+    next.resize(n);
+    let f32s = |k: usize| out[k * n..(k + 1) * n].iter().map(|&b| f32::from_bits(b));
+    next.elevation_km
+        .iter_mut()
+        .zip(f32s(0))
+        .for_each(|(a, b)| *a = b);
+    next.thickness_km
+        .iter_mut()
+        .zip(f32s(1))
+        .for_each(|(a, b)| *a = b);
+    next.age_my
+        .iter_mut()
+        .zip(f32s(2))
+        .for_each(|(a, b)| *a = b);
+    next.orogeny_age_my
+        .iter_mut()
+        .zip(f32s(3))
+        .for_each(|(a, b)| *a = b);
+    for (field, at) in [(&mut next.ridge_dir, 4 * n), (&mut next.fold_dir, 7 * n)] {
+        for (d, c) in field.iter_mut().zip(out[at..at + 3 * n].chunks_exact(3)) {
+            *d = [c[0], c[1], c[2]].map(f32::from_bits);
+        }
+    }
+    let byte = |at: usize, i: usize| (out[at + i / 4] >> (8 * (i % 4))) as u8;
+    for i in 0..n {
+        next.crust_type[i] = match byte(10 * n, i) {
+            0 => CrustType::Oceanic,
+            1 => CrustType::Continental,
+            b => return Err(fail(format!("crust type code {b} at sample {i}"))),
+        };
+        next.orogeny[i] = match byte(10 * n + nw, i) {
+            0 => Orogeny::None,
+            1 => Orogeny::Andean,
+            2 => Orogeny::Himalayan,
+            b => return Err(fail(format!("orogeny code {b} at sample {i}"))),
+        };
+    }
+    next.plate
+        .copy_from_slice(&out[10 * n + 2 * nw..11 * n + 2 * nw]);
+    ctx.traffic.interpolations += 1;
+    Ok(())
+}

@@ -248,16 +248,42 @@ pub fn grid_sphere(lon_segments: u32) -> (Vec<[f32; 2]>, Vec<u32>) {
     (v, idx)
 }
 
+/// What the globe's textures hold: the overlay colours (RGBA8, sRGB) and the elevation (km)
+/// of the equirectangular grid. Made off the UI thread when a new snapshot or overlay
+/// arrives, and uploaded once per change (two texture writes).
+#[derive(Debug, Default)]
+pub struct GlobeData {
+    /// Width and height of the grid, pixels.
+    pub size: [usize; 2],
+    /// Overlay colour per pixel, RGBA8 (sRGB, unmultiplied), rows north to south.
+    pub rgba: Vec<u8>,
+    /// Elevation per pixel, km.
+    pub elevation_km: Vec<f32>,
+}
+
+impl GlobeData {
+    /// The data of a coloured map and its elevation grid.
+    pub fn new(colours: &egui::ColorImage, elevation_km: Vec<f32>) -> Self {
+        let mut rgba = Vec::with_capacity(colours.pixels.len() * 4);
+        for p in &colours.pixels {
+            rgba.extend_from_slice(&p.to_srgba_unmultiplied());
+        }
+        Self {
+            size: colours.size,
+            rgba,
+            elevation_km,
+        }
+    }
+}
+
 /// One frame's globe: the camera, the look, and (when new) the textures to upload.
 pub struct GlobeCallback {
     /// Uniforms for this frame (the aspect ratio comes from the rect).
     pub uniforms: GlobeUniforms,
     /// Identifies the texture contents; uploaded when it changes.
     pub generation: u64,
-    /// Overlay colours.
-    pub colours: Arc<egui::ColorImage>,
-    /// Elevation per pixel, km.
-    pub elevation_km: Arc<Vec<f32>>,
+    /// The texture contents.
+    pub data: Arc<GlobeData>,
 }
 
 impl CallbackTrait for GlobeCallback {
@@ -274,7 +300,10 @@ impl CallbackTrait for GlobeCallback {
         };
         queue.write_buffer(&r.uniforms, 0, bytemuck::bytes_of(&self.uniforms));
         if r.uploaded != self.generation || r.bind_group.is_none() {
-            let [w, h] = self.colours.size;
+            let [w, h] = self.data.size;
+            if w == 0 || h == 0 || self.data.rgba.len() != w * h * 4 {
+                return Vec::new();
+            }
             let size = wgpu::Extent3d {
                 width: w as u32,
                 height: h as u32,
@@ -304,12 +333,6 @@ impl CallbackTrait for GlobeCallback {
                 r.bind_group = None;
             }
             if let Some((ct, et)) = &r.textures {
-                let rgba: Vec<u8> = self
-                    .colours
-                    .pixels
-                    .iter()
-                    .flat_map(|p| p.to_srgba_unmultiplied())
-                    .collect();
                 let write = |t: &wgpu::Texture, data: &[u8], bpp: u32| {
                     queue.write_texture(
                         t.as_image_copy(),
@@ -322,9 +345,9 @@ impl CallbackTrait for GlobeCallback {
                         size,
                     );
                 };
-                write(ct, &rgba, 4);
-                if self.elevation_km.len() == w * h {
-                    write(et, bytemuck::cast_slice(&self.elevation_km), 4);
+                write(ct, &self.data.rgba, 4);
+                if self.data.elevation_km.len() == w * h {
+                    write(et, bytemuck::cast_slice(&self.data.elevation_km), 4);
                 }
                 if r.bind_group.is_none() {
                     let cv = ct.create_view(&Default::default());

@@ -22,6 +22,9 @@ use super::worker::{Request, SimHandle, Snapshot};
 /// Least time between two frames while the simulation runs (60 frames per second at most).
 pub const FRAME_INTERVAL: std::time::Duration = std::time::Duration::from_micros(16_667);
 
+/// Width of the maps "Export maps" writes, pixels (the height is half).
+pub const EXPORT_MAP_WIDTH: u32 = 2048;
+
 /// What a click on the map does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Tool {
@@ -792,6 +795,21 @@ impl ViewerApp {
                 self.camera.pitch = (self.camera.pitch + d.y * 0.006).clamp(-1.55, 1.55);
             }
         }
+        if resp.drag_stopped()
+            && self.tool == Tool::PickPole
+            && let Some(e) = self.edit
+        {
+            // Releasing the dragged pole applies it (through the command API).
+            self.sim.send(Request::Apply(Command::SetMotion {
+                plate: PlateRef::Id(e.plate),
+                pole: LatLon {
+                    lat: e.pole_lat,
+                    lon: e.pole_lon,
+                },
+                speed_mm_per_yr: e.speed_mm_per_yr,
+            }));
+            self.tool = Tool::Select;
+        }
         if resp.hovered() {
             let scroll = ui.input(|i| i.smooth_scroll_delta.y);
             if scroll != 0.0 {
@@ -991,9 +1009,26 @@ impl ViewerApp {
     /// Every core and plugin parameter with its unit and range; checked before it is sent.
     pub fn params_ui(&mut self, ui: &mut egui::Ui) {
         let Some(s) = self.snap.clone() else { return };
-        egui::CollapsingHeader::new("Parameters")
+        let shown = egui::CollapsingHeader::new("Parameters")
             .default_open(false)
             .show(ui, |ui| {
+                if let Some(e) = self.param_errors.get("") {
+                    ui.colored_label(Color32::from_rgb(230, 80, 60), e);
+                }
+                ui.horizontal(|ui| {
+                    let r = ui.button("Apply to this planet");
+                    self.track("params:apply", &r);
+                    if r.clicked() {
+                        self.apply_params(&s, false);
+                    }
+                    if ui.button("New planet").clicked() {
+                        self.apply_params(&s, true);
+                    }
+                    if ui.button("Revert").clicked() {
+                        self.param_text = param_texts(&s);
+                        self.param_errors.clear();
+                    }
+                });
                 let mut section = "";
                 let specs: Vec<crate::io::params::ParamSpec> = Params::schema()
                     .iter()
@@ -1007,30 +1042,21 @@ impl ViewerApp {
                     }
                     ui.horizontal(|ui| {
                         let text = self.param_text.entry(spec.key.to_string()).or_default();
-                        ui.add(egui::TextEdit::singleline(text).desired_width(80.0))
+                        let r = ui
+                            .add(egui::TextEdit::singleline(text).desired_width(80.0))
                             .on_hover_text(format!(
                                 "{}\nrange {}..={}, default {}",
                                 spec.doc, spec.min, spec.max, spec.default
                             ));
+                        self.rects.insert(format!("param:{}", spec.key), r.rect);
                         ui.label(format!("{} {}", spec.name, spec.unit));
                     });
                     if let Some(e) = self.param_errors.get(spec.key) {
                         ui.colored_label(Color32::from_rgb(230, 80, 60), e);
                     }
                 }
-                ui.horizontal(|ui| {
-                    if ui.button("Apply to this planet").clicked() {
-                        self.apply_params(&s, false);
-                    }
-                    if ui.button("New planet").clicked() {
-                        self.apply_params(&s, true);
-                    }
-                    if ui.button("Revert").clicked() {
-                        self.param_text = param_texts(&s);
-                        self.param_errors.clear();
-                    }
-                });
             });
+        self.track("params:header", &shown.header_response);
     }
 
     /// Checks the parameter fields; sends them when all are valid: to the running planet as
@@ -1121,10 +1147,14 @@ impl ViewerApp {
             ui.text_edit_singleline(&mut self.file_path);
         });
         ui.horizontal(|ui| {
-            if ui.button("Save").clicked() {
+            let r = ui.button("Save");
+            self.track("save", &r);
+            if r.clicked() {
                 self.sim.send(Request::Save(PathBuf::from(&self.file_path)));
             }
-            if ui.button("Load").clicked() {
+            let r = ui.button("Load");
+            self.track("load", &r);
+            if r.clicked() {
                 self.sim.send(Request::Load(PathBuf::from(&self.file_path)));
             }
         });
@@ -1133,11 +1163,17 @@ impl ViewerApp {
             ui.text_edit_singleline(&mut self.export_dir);
         });
         ui.horizontal(|ui| {
-            if ui.button("Export maps (PNG)").clicked() {
-                self.sim
-                    .send(Request::ExportMaps(PathBuf::from(&self.export_dir), 2048));
+            let r = ui.button("Export maps (PNG)");
+            self.track("export_maps", &r);
+            if r.clicked() {
+                self.sim.send(Request::ExportMaps(
+                    PathBuf::from(&self.export_dir),
+                    EXPORT_MAP_WIDTH,
+                ));
             }
-            if ui.button("Export view (PNG)").clicked() {
+            let r = ui.button("Export view (PNG)");
+            self.track("export_view", &r);
+            if r.clicked() {
                 self.export_view(ui.ctx());
             }
         });

@@ -61,3 +61,31 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     let lit = 0.30 + 0.70 * max(dot(normalize(in.normal), globe.light_dir.xyz), 0.0);
     return vec4<f32>(c * lit, 1.0);
 }
+
+// The flat map (the viewer's 2D view): a quad over the paint callback's viewport, coloured from
+// the same texture, texel by texel (nearest) and without blending, which keeps a software
+// rasteriser's work per pixel to one load and one store.
+struct MapOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) uv: vec2<f32>,
+};
+
+@vertex
+fn vs_map(@builtin(vertex_index) i: u32) -> MapOut {
+    var corners = array<vec2<f32>, 6>(
+        vec2<f32>(0.0, 0.0), vec2<f32>(1.0, 0.0), vec2<f32>(1.0, 1.0),
+        vec2<f32>(0.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(0.0, 1.0),
+    );
+    let c = corners[i];
+    var out: MapOut;
+    out.clip = vec4<f32>(c.x * 2.0 - 1.0, 1.0 - c.y * 2.0, 0.0, 1.0);
+    out.uv = c;
+    return out;
+}
+
+@fragment
+fn fs_map(in: MapOut) -> @location(0) vec4<f32> {
+    let dims = vec2<i32>(textureDimensions(colour_tex));
+    let texel = clamp(vec2<i32>(in.uv * vec2<f32>(dims)), vec2<i32>(0, 0), dims - vec2<i32>(1, 1));
+    return vec4<f32>(textureLoad(colour_tex, texel, 0).rgb, 1.0);
+}

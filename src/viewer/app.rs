@@ -640,10 +640,15 @@ impl ViewerApp {
         img: Arc<ColorImage>,
         globe: Option<Arc<super::globe::GlobeData>>,
     ) {
-        match &mut self.map_tex {
-            Some(t) => t.set(img.clone(), TextureOptions::LINEAR),
-            None => {
-                self.map_tex = Some(ctx.load_texture("map", img.clone(), TextureOptions::LINEAR))
+        // With the wgpu renderer the map is drawn from the globe's textures (uploaded by its
+        // paint callback); egui's texture is only for the other renderers and headless runs.
+        if !self.globe_ready {
+            match &mut self.map_tex {
+                Some(t) => t.set(img.clone(), TextureOptions::LINEAR),
+                None => {
+                    self.map_tex =
+                        Some(ctx.load_texture("map", img.clone(), TextureOptions::LINEAR))
+                }
             }
         }
         if globe.is_some() {
@@ -697,7 +702,19 @@ impl ViewerApp {
         let (rect, resp) = ui.allocate_exact_size(Vec2::new(w, w / 2.0), Sense::click());
         self.track("map", &resp);
         let painter = ui.painter_at(rect);
-        if let Some(t) = &self.map_tex {
+        if self.globe_ready
+            && let Some(data) = self.globe_data.clone()
+        {
+            // With the wgpu renderer the map is one quad of the globe's pipeline (cheaper per
+            // pixel than an egui image on a software rasteriser).
+            painter.add(super::globe::map_callback(
+                rect,
+                super::globe::MapCallback {
+                    generation: self.map_generation,
+                    data,
+                },
+            ));
+        } else if let Some(t) = &self.map_tex {
             painter.image(
                 t.id(),
                 rect,

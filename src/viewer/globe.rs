@@ -14,7 +14,7 @@ use glam::{Mat4, Vec3};
 pub const GLOBE_WGSL: &str = include_str!("../../shaders/globe.wgsl");
 
 /// Grid resolution: longitude segments (latitude segments are half).
-const LON_SEGMENTS: u32 = 360;
+const LON_SEGMENTS: u32 = 256;
 
 /// Uniforms; keep in sync with `Globe` in shaders/globe.wgsl.
 #[repr(C)]

@@ -998,6 +998,9 @@ fn view(a: ViewArgs) -> Result<()> {
         if let Some(p) = report.frame_ms {
             println!("  fps (1 / median interval): {:.1}", 1e3 / p.median);
         }
+        if let Some(f) = report.running_fps {
+            println!("  fps (frames / seconds):    {f:.1}");
+        }
         println!("  app UI code:    {}", show(report.ui_ms));
         println!("  eframe CPU:     {}", show(report.cpu_ms));
     }

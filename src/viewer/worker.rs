@@ -32,8 +32,13 @@ pub const MAP_HEIGHT: u32 = MAP_WIDTH / 2;
 /// Least time between two snapshots while running (a snapshot resamples the crust).
 const SNAPSHOT_INTERVAL: Duration = Duration::from_millis(120);
 
-/// Lowers the calling thread's scheduling priority (by 10 `nice` levels; on Linux a thread's
-/// own). The viewer's simulation threads call it, so that drawing frames comes first.
+/// How many `nice` levels the viewer's simulation threads drop (5: about a quarter of the CPU
+/// when the window wants all of it, which keeps a big planet stepping).
+const PRIORITY_DROP: i32 = 5;
+
+/// Lowers the calling thread's scheduling priority (by [`PRIORITY_DROP`] `nice` levels; on
+/// Linux a thread's own). The viewer's simulation threads call it, so that drawing frames
+/// comes first.
 pub fn lower_thread_priority() {
     #[cfg(target_os = "linux")]
     {
@@ -42,7 +47,7 @@ pub fn lower_thread_priority() {
         }
         // SAFETY: nice(2) takes an integer and only changes the scheduling priority of the
         // calling thread (Linux threads are scheduled on their own); it has no other effect.
-        let _ = unsafe { nice(10) };
+        let _ = unsafe { nice(PRIORITY_DROP) };
     }
 }
 

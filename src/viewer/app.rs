@@ -354,7 +354,8 @@ impl ViewerApp {
             // `clear_color`), so each pixel is shaded once less. On a software rasteriser the
             // panel fills were the largest share of a frame.
             self.style_set = true;
-            ui.ctx().global_style_mut(|s| s.visuals.panel_fill = Color32::TRANSPARENT);
+            ui.ctx()
+                .global_style_mut(|s| s.visuals.panel_fill = Color32::TRANSPARENT);
         }
         self.poll();
         let running = self.snap.as_ref().is_some_and(|s| s.running);
@@ -1129,10 +1130,7 @@ impl ViewerApp {
             self.status = format!(
                 "{} parameter(s) refused: {}",
                 self.param_errors.len(),
-                self.param_errors
-                    .values()
-                    .next()
-                    .map_or("", |e| e.as_str())
+                self.param_errors.values().next().map_or("", |e| e.as_str())
             );
             return false;
         }

@@ -355,7 +355,7 @@ fn upload(
     generation: u64,
     data: &GlobeData,
 ) {
-if r.uploaded != generation || r.bind_group.is_none() {
+    if r.uploaded != generation || r.bind_group.is_none() {
         let [w, h] = data.size;
         if w == 0 || h == 0 || data.rgba.len() != w * h * 4 {
             return;

@@ -33,10 +33,7 @@ impl Plugin for CounterPlugin {
 }
 
 fn temp_dir(name: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!(
-        "planet-viewer-unit-{name}-{}",
-        std::process::id()
-    ));
+    let d = std::env::temp_dir().join(format!("planet-viewer-unit-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
@@ -473,10 +470,17 @@ fn save_then_load_from_the_viewer_restores_the_same_state() {
     let (loaded, step) = h.inspect(|sim| (sim.state_hash(), sim.clock().step));
     let snap = h.app.snap.clone().unwrap();
     h.finish();
-    assert_eq!(loaded, saved, "the loaded planet is the saved one, bit for bit");
+    assert_eq!(
+        loaded, saved,
+        "the loaded planet is the saved one, bit for bit"
+    );
     assert_eq!(step, 2);
     assert_eq!(snap.step, 2, "the view shows the loaded planet");
-    assert!(snap.log.iter().any(|l| l.starts_with("loaded")), "{:?}", snap.log);
+    assert!(
+        snap.log.iter().any(|l| l.starts_with("loaded")),
+        "{:?}",
+        snap.log
+    );
 }
 
 #[test]
@@ -522,9 +526,15 @@ fn export_maps_writes_pngs_of_the_planet() {
         let (w, hgt, colours) = png_colours(&path);
         assert_eq!(
             (w, hgt),
-            (super::app::EXPORT_MAP_WIDTH, super::app::EXPORT_MAP_WIDTH / 2)
+            (
+                super::app::EXPORT_MAP_WIDTH,
+                super::app::EXPORT_MAP_WIDTH / 2
+            )
         );
-        assert!(colours >= least, "{name} is (nearly) blank: {colours} colours");
+        assert!(
+            colours >= least,
+            "{name} is (nearly) blank: {colours} colours"
+        );
     }
 }
 
@@ -575,7 +585,10 @@ fn export_view_writes_the_window_image() {
     assert!(path.is_file(), "view.png was not written");
     let (pw, ph, colours) = png_colours(&path);
     assert_eq!((pw, ph), (1280, 800));
-    assert!(colours >= 4, "view.png is (nearly) blank: {colours} colours");
+    assert!(
+        colours >= 4,
+        "view.png is (nearly) blank: {colours} colours"
+    );
 }
 
 #[test]
@@ -609,7 +622,11 @@ fn dragging_the_pole_on_the_globe_sets_the_plates_motion_through_a_command() {
         (to.x - globe.left()) / globe.width() * 2.0 - 1.0,
         1.0 - (to.y - globe.top()) / globe.height() * 2.0,
     ];
-    let hit = h.app.camera.pick(aspect, ndc).expect("the drop is on the globe");
+    let hit = h
+        .app
+        .camera
+        .pick(aspect, ndc)
+        .expect("the drop is on the globe");
     let dropped = glam::DVec3::new(hit.x as f64, hit.y as f64, hit.z as f64).normalize();
     assert_eq!(h.app.tool, Tool::Select, "the drop ends the pick");
     let id = plate.id;
@@ -750,14 +767,25 @@ fn set_param_commands_are_checked_like_parameter_files() {
     };
     for (cmd, why) in [
         (set("planet.samples", SettingValue::Int(5000)), "built"),
-        (set("continent.erosion_mm_per_yr", SettingValue::Float(-1.0)), "erosion"),
+        (
+            set("continent.erosion_mm_per_yr", SettingValue::Float(-1.0)),
+            "erosion",
+        ),
         (set("no.such_key", SettingValue::Float(1.0)), "no.such_key"),
-        (set("continent.erosion_mm_per_yr", SettingValue::Bool(true)), "erosion"),
+        (
+            set("continent.erosion_mm_per_yr", SettingValue::Bool(true)),
+            "erosion",
+        ),
     ] {
         let e = sim.apply(&cmd).expect_err(&format!("{cmd:?} is refused"));
         assert!(e.to_string().contains(why), "{cmd:?}: {e}");
     }
-    assert!(sim.world().resource::<crate::io::save::CommandHistory>().entries.is_empty());
+    assert!(
+        sim.world()
+            .resource::<crate::io::save::CommandHistory>()
+            .entries
+            .is_empty()
+    );
     // JSON round trip of what the history records.
     let ok = set("continent.erosion_mm_per_yr", SettingValue::Int(1));
     sim.apply(&ok).unwrap();
@@ -811,10 +839,20 @@ fn new_and_loaded_planets_keep_the_viewers_plugins() {
     h.click("load");
     h.settle();
     let snap = h.app.snap.clone().unwrap();
-    assert!(snap.log.iter().any(|l| l.starts_with("loaded")), "{:?}", snap.log);
-    assert!(has_counter(&h), "the loaded planet has the third-party plugin");
+    assert!(
+        snap.log.iter().any(|l| l.starts_with("loaded")),
+        "{:?}",
+        snap.log
+    );
+    assert!(
+        has_counter(&h),
+        "the loaded planet has the third-party plugin"
+    );
     h.step(1);
     let runs = h.inspect(|sim| sim.world().get_resource::<Runs>().map(|r| r.0));
     h.finish();
-    assert!(runs.is_some(), "the plugin's resource exists after the load");
+    assert!(
+        runs.is_some(),
+        "the plugin's resource exists after the load"
+    );
 }

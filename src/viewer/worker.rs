@@ -57,6 +57,10 @@ pub type SimFn = Box<dyn FnOnce(&mut Simulation) + Send>;
 /// Builds the simulation on its thread (a bevy app is not `Send`, so it is made where it runs).
 pub type SimFactory = Box<dyn FnOnce() -> Result<Simulation, String> + Send>;
 
+/// Where the UI leaves the function that asks it for a new frame (see
+/// [`SimHandle::set_repaint`]).
+type RepaintSlot = Arc<Mutex<Option<Box<dyn Fn() + Send>>>>;
+
 /// Makes the plugin group the viewer's planets are built with: "New planet" and "Load" rebuild
 /// with it, so third-party plugins the viewer was started with stay.
 pub type PluginsFn = Arc<dyn Fn() -> bevy_app::PluginGroupBuilder + Send + Sync>;
@@ -281,7 +285,7 @@ pub struct SimHandle {
     shared: Arc<(Mutex<Shared>, Condvar)>,
     next_seq: u64,
     thread: Option<JoinHandle<()>>,
-    repaint: Arc<Mutex<Option<Box<dyn Fn() + Send>>>>,
+    repaint: RepaintSlot,
 }
 
 impl SimHandle {
@@ -299,7 +303,7 @@ impl SimHandle {
     ) -> Self {
         let (tx, rx) = channel();
         let shared: Arc<(Mutex<Shared>, Condvar)> = Arc::default();
-        let repaint: Arc<Mutex<Option<Box<dyn Fn() + Send>>>> = Arc::default();
+        let repaint: RepaintSlot = Arc::default();
         let (shared2, repaint2) = (shared.clone(), repaint.clone());
         let thread = std::thread::Builder::new()
             .name("planet-sim".into())
@@ -426,7 +430,7 @@ struct Worker {
     plugins: PluginsFn,
     rx: Receiver<(u64, Request)>,
     shared: Arc<(Mutex<Shared>, Condvar)>,
-    repaint: Arc<Mutex<Option<Box<dyn Fn() + Send>>>>,
+    repaint: RepaintSlot,
     running: bool,
     run_until_my: Option<f64>,
     steps_left: Option<u64>,
@@ -447,7 +451,7 @@ impl Worker {
         plugins: PluginsFn,
         rx: Receiver<(u64, Request)>,
         shared: Arc<(Mutex<Shared>, Condvar)>,
-        repaint: Arc<Mutex<Option<Box<dyn Fn() + Send>>>>,
+        repaint: RepaintSlot,
     ) -> Self {
         let lookup = Arc::new(PixelLookup::build(sim.mesh(), MAP_WIDTH, MAP_HEIGHT));
         let positions = Arc::new(sim.mesh().positions.clone());

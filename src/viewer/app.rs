@@ -85,6 +85,8 @@ pub struct FrameStats {
     pub running_frames: u64,
     /// Seconds spent drawing those frames (from the first to the last).
     pub running_secs: f64,
+    /// Keep every frame's times (below; for `--fps-report`, which ends the session).
+    pub record_frame_times: bool,
     /// Time from the previous frame to this one, ms, for every frame drawn while running.
     pub running_intervals_ms: Vec<f64>,
     /// Time spent in the app's UI code (layout, our painting), ms, per frame while running.
@@ -139,7 +141,9 @@ impl FrameStats {
                 let dt = now.duration_since(t).as_secs_f64();
                 self.running_secs += dt;
                 self.running_frames += 1;
-                self.running_intervals_ms.push(dt * 1e3);
+                if self.record_frame_times {
+                    self.running_intervals_ms.push(dt * 1e3);
+                }
             }
             self.last_running = Some(now);
         } else {
@@ -1341,7 +1345,7 @@ impl eframe::App for ViewerApp {
     fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
         let t = Instant::now();
         self.root_ui(ui);
-        if self.frames.last_running.is_some() {
+        if self.frames.record_frame_times && self.frames.last_running.is_some() {
             self.frames
                 .running_ui_ms
                 .push(t.elapsed().as_secs_f64() * 1e3);

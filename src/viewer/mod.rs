@@ -176,6 +176,7 @@ pub fn run_with_plugins(
                 app.sim.send(Request::SetSpeed(opts.steps_per_second));
             }
             if let Some(n) = opts.fps_report {
+                app.frames.record_frame_times = true;
                 let mut plan = ExitPlan::new(0, None);
                 plan.after_running_frames = Some(n);
                 app = app.with_exit_plan(plan);
@@ -214,9 +215,11 @@ impl eframe::App for ReportingApp {
             r.running_fps = self.app.frames.running_fps();
             r.steps = self.app.snap.as_ref().map_or(0, |s| s.steps_taken);
             r.samples = self.app.snap.as_ref().map_or(0, |s| s.samples);
-            r.frame_ms = Percentiles::of(&self.app.frames.running_intervals_ms);
-            r.ui_ms = Percentiles::of(&self.app.frames.running_ui_ms);
-            r.cpu_ms = Percentiles::of(&self.app.frames.running_cpu_ms);
+            if self.app.frames.record_frame_times {
+                r.frame_ms = Percentiles::of(&self.app.frames.running_intervals_ms);
+                r.ui_ms = Percentiles::of(&self.app.frames.running_ui_ms);
+                r.cpu_ms = Percentiles::of(&self.app.frames.running_cpu_ms);
+            }
             r.snapshots = self.app.frames.running_snapshots;
         }
     }

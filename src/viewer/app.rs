@@ -174,7 +174,7 @@ pub struct ViewerApp {
     /// The image the map texture holds now (what is drawn).
     pub map_image: Option<Arc<ColorImage>>,
     map_tex: Option<TextureHandle>,
-    drawn: Option<(usize, BaseLayer)>,
+    drawn: Option<MapKey>,
     /// The selected plate.
     pub selected: Option<u32>,
     /// The motion edit fields.
@@ -223,9 +223,18 @@ pub struct ViewerApp {
     painter: Option<MapPainter>,
 }
 
-/// A map to colour: a snapshot and a base layer (and the elevation grid for the globe).
+/// What a coloured map shows: the snapshot (by address), the base layer, and the vector layers
+/// drawn into the globe's texture (none without the wgpu renderer: egui paints them).
+type MapKey = (usize, BaseLayer, VectorLayers);
+
+/// Width of the map on the screen the vector glyphs are laid out for, pixels (their spacing
+/// and line widths scale from it to the texture).
+const GLYPH_LAYOUT_WIDTH: f32 = 690.0;
+
+/// A map to colour: a snapshot and a base layer (and, for the wgpu renderer, the elevation
+/// grid and the vector layers drawn into the texture).
 struct PaintJob {
-    key: (usize, BaseLayer),
+    key: MapKey,
     snap: Arc<Snapshot>,
     layer: BaseLayer,
     elevation: bool,
@@ -233,7 +242,7 @@ struct PaintJob {
 
 /// A coloured map.
 struct Painted {
-    key: (usize, BaseLayer),
+    key: MapKey,
     image: Arc<ColorImage>,
     globe: Option<Arc<super::globe::GlobeData>>,
 }
@@ -248,7 +257,19 @@ fn paint_job(job: PaintJob) -> Painted {
             .into_par_iter()
             .map(|i| lk.lerp(&s.crust.elevation_km, i))
             .collect();
-        Arc::new(super::globe::GlobeData::new(&image, elevation_km))
+        // The vector layers are drawn into the texture here, once per snapshot, instead of as
+        // thousands of triangles in every frame.
+        let layers = job.key.2;
+        if layers == VectorLayers::default() {
+            Arc::new(super::globe::GlobeData::new(&image, elevation_km))
+        } else {
+            let mut with = (*image).clone();
+            let [w, h] = with.size;
+            let rect = Rect::from_min_size(egui::Pos2::ZERO, Vec2::new(w as f32, h as f32));
+            let mesh = map::vector_mesh(rect, s, layers, w as f32 / GLYPH_LAYOUT_WIDTH);
+            map::rasterize_mesh(&mesh, w, h, &mut with.pixels);
+            Arc::new(super::globe::GlobeData::new(&with, elevation_km))
+        }
     });
     Painted {
         key: job.key,
@@ -430,7 +451,7 @@ impl ViewerApp {
         }
         let drawn_now = self
             .drawn
-            .is_some_and(|(p, _)| p == Arc::as_ptr(&s) as usize);
+            .is_some_and(|(p, _, _)| p == Arc::as_ptr(&s) as usize);
         if s.steps_taken < plan.after_steps || s.running || !drawn_now {
             return;
         }
@@ -606,7 +627,12 @@ impl ViewerApp {
     /// Rebuilds the map image when the snapshot or the base layer changed.
     pub fn refresh_map(&mut self, ctx: &egui::Context) {
         let Some(s) = self.snap.clone() else { return };
-        let key = (Arc::as_ptr(&s) as usize, self.base);
+        let drawn_layers = if self.globe_ready {
+            self.layers
+        } else {
+            VectorLayers::default()
+        };
+        let key = (Arc::as_ptr(&s) as usize, self.base, drawn_layers);
         // With a painter thread: install what it finished, and give it the next job when idle.
         if let Some(p) = self.painter.as_mut() {
             if let Ok(done) = p.rx.try_recv() {
@@ -641,7 +667,7 @@ impl ViewerApp {
     fn install_map(
         &mut self,
         ctx: &egui::Context,
-        key: (usize, BaseLayer),
+        key: MapKey,
         img: Arc<ColorImage>,
         globe: Option<Arc<super::globe::GlobeData>>,
     ) {
@@ -727,7 +753,10 @@ impl ViewerApp {
                 Color32::WHITE,
             );
         }
-        map::paint_vectors(&painter, rect, &s, self.layers);
+        if !self.globe_ready {
+            // With the wgpu renderer they are in the texture.
+            map::paint_vectors(&painter, rect, &s, self.layers);
+        }
         // Selected plate: its pole and its centroid.
         if let Some(p) = self.selected.and_then(|id| s.plate(id)) {
             let c = map::to_screen(rect, p.centroid_world);

@@ -345,11 +345,11 @@ fn decimate(points: impl Iterator<Item = Pos2>, cell: f32) -> Vec<Pos2> {
 
 /// The vector layers over the map drawn in `rect`, as one mesh: glyphs on a grid of screen
 /// spacing (so their number depends on the window, not on the planet), front points
-/// decimated to one per 3 pixels.
-pub fn vector_mesh(rect: Rect, s: &Snapshot, layers: VectorLayers) -> egui::Mesh {
+/// decimated to one per 3 pixels. `px` scales spacing, widths and sizes (1 on the screen).
+pub fn vector_mesh(rect: Rect, s: &Snapshot, layers: VectorLayers, px: f32) -> egui::Mesh {
     let mut b = GlyphBatch::default();
     let lk = &s.lookup;
-    let spacing = 28.0f32;
+    let spacing = 28.0 * px;
     let cols = (rect.width() / spacing).max(1.0) as usize;
     let rows = (rect.height() / spacing).max(1.0) as usize;
     let glyph = |c: usize, r: usize| -> (Pos2, usize, DVec3) {
@@ -382,7 +382,7 @@ pub fn vector_mesh(rect: Rect, s: &Snapshot, layers: VectorLayers) -> egui::Mesh
                     continue;
                 }
                 let half = sd.normalized() * (spacing * 0.35);
-                b.line(pos - half, pos + half, 1.5, colour);
+                b.line(pos - half, pos + half, 1.5 * px, colour);
             }
         }
     }
@@ -397,10 +397,10 @@ pub fn vector_mesh(rect: Rect, s: &Snapshot, layers: VectorLayers) -> egui::Mesh
                 };
                 let v = plate.pole_unit.cross(p) * (plate.angular_speed_rad_per_my * s.radius_km);
                 let sd = screen_dir(p, v) * scale;
-                if sd.length() < 1.0 {
-                    b.dot(pos, 1.2, black);
+                if sd.length() < px {
+                    b.dot(pos, 1.2 * px, black);
                 } else {
-                    b.arrow(pos, sd, 1.3, black);
+                    b.arrow(pos, sd, 1.3 * px, black);
                 }
             }
         }
@@ -411,8 +411,8 @@ pub fn vector_mesh(rect: Rect, s: &Snapshot, layers: VectorLayers) -> egui::Mesh
             .fronts
             .iter()
             .flat_map(|f| f.points_world.iter().map(|p| to_screen(rect, *p)));
-        for p in decimate(points, 3.0) {
-            b.dot(p, 1.5, red);
+        for p in decimate(points, 3.0 * px) {
+            b.dot(p, 1.5 * px, red);
         }
     }
     if layers.terranes {
@@ -421,8 +421,8 @@ pub fn vector_mesh(rect: Rect, s: &Snapshot, layers: VectorLayers) -> egui::Mesh
             let r = (rect.width() as f64 * 0.25 * (t.area_km2 / total).sqrt()).max(2.0) as f32;
             let [cr, cg, cb] = plate_colour(t.plate);
             let at = to_screen(rect, t.centroid_world);
-            b.ring(at, r, 2.0, Color32::from_rgb(cr, cg, cb));
-            b.dot(at, 1.5, Color32::BLACK);
+            b.ring(at, r, 2.0 * px, Color32::from_rgb(cr, cg, cb));
+            b.dot(at, 1.5 * px, Color32::BLACK);
         }
     }
     b.mesh
@@ -433,9 +433,42 @@ pub fn paint_vectors(painter: &egui::Painter, rect: Rect, s: &Snapshot, layers: 
     if layers == VectorLayers::default() {
         return;
     }
-    let mesh = vector_mesh(rect, s, layers);
+    let mesh = vector_mesh(rect, s, layers, 1.0);
     if !mesh.is_empty() {
         painter.add(egui::Shape::mesh(mesh));
+    }
+}
+
+/// Fills the triangles of `mesh` (positions in pixels, vertex colours, opaque) into an image
+/// of `width × height` pixels: a pixel is covered when its centre is inside a triangle.
+pub fn rasterize_mesh(mesh: &egui::Mesh, width: usize, height: usize, pixels: &mut [Color32]) {
+    if pixels.len() != width * height {
+        return;
+    }
+    for t in mesh.indices.chunks_exact(3) {
+        let v = |i: u32| mesh.vertices.get(i as usize);
+        let (Some(a), Some(b), Some(c)) = (v(t[0]), v(t[1]), v(t[2])) else {
+            continue;
+        };
+        let (a, b, colour, c) = (a.pos, b.pos, a.color, c.pos);
+        let area = (b - a).x * (c - a).y - (b - a).y * (c - a).x;
+        if area.abs() < 1e-9 {
+            continue;
+        }
+        let x0 = a.x.min(b.x).min(c.x).floor().max(0.0) as usize;
+        let y0 = a.y.min(b.y).min(c.y).floor().max(0.0) as usize;
+        let x1 = (a.x.max(b.x).max(c.x).ceil().max(0.0) as usize).min(width);
+        let y1 = (a.y.max(b.y).max(c.y).ceil().max(0.0) as usize).min(height);
+        let edge =
+            |p: Pos2, q: Pos2, r: Pos2| ((q - p).x * (r - p).y - (q - p).y * (r - p).x) / area;
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let p = Pos2::new(x as f32 + 0.5, y as f32 + 0.5);
+                if edge(a, b, p) >= 0.0 && edge(b, c, p) >= 0.0 && edge(c, a, p) >= 0.0 {
+                    pixels[y * width + x] = colour;
+                }
+            }
+        }
     }
 }
 

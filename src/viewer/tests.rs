@@ -856,3 +856,58 @@ fn new_and_loaded_planets_keep_the_viewers_plugins() {
         "the plugin's resource exists after the load"
     );
 }
+
+#[test]
+fn a_triangle_rasterized_into_the_map_covers_the_pixels_inside_it() {
+    let (w, h) = (16usize, 8usize);
+    let mut pixels = vec![egui::Color32::WHITE; w * h];
+    let mut mesh = egui::Mesh::default();
+    let red = egui::Color32::RED;
+    // Clockwise on the screen (y down); the fill must not depend on the winding.
+    mesh.colored_vertex(egui::pos2(0.0, 0.0), red);
+    mesh.colored_vertex(egui::pos2(8.0, 0.0), red);
+    mesh.colored_vertex(egui::pos2(0.0, 8.0), red);
+    mesh.add_triangle(0, 2, 1);
+    map::rasterize_mesh(&mesh, w, h, &mut pixels);
+    for y in 0..h {
+        for x in 0..w {
+            let inside = (x as f32 + 0.5) + (y as f32 + 0.5) <= 8.0;
+            assert_eq!(pixels[y * w + x] == red, inside, "pixel ({x}, {y})");
+        }
+    }
+}
+
+#[test]
+fn velocity_arrows_drawn_into_the_map_texture_change_it_in_their_colour_only() {
+    let h = Harness::new(plain);
+    let snap = h.app.snap.clone().unwrap();
+    h.finish();
+    let base = map::render_base(&snap, BaseLayer::Plates);
+    let [w, hgt] = base.size;
+    let rect = egui::Rect::from_min_size(egui::Pos2::ZERO, egui::vec2(w as f32, hgt as f32));
+    let layers = map::VectorLayers {
+        velocity: true,
+        ..Default::default()
+    };
+    let mesh = map::vector_mesh(rect, &snap, layers, w as f32 / 690.0);
+    assert!(!mesh.is_empty());
+    let mut with = base.pixels.clone();
+    map::rasterize_mesh(&mesh, w, hgt, &mut with);
+    let changed: Vec<_> = with
+        .iter()
+        .zip(&base.pixels)
+        .filter(|(a, b)| a != b)
+        .map(|(a, _)| *a)
+        .collect();
+    assert!(
+        changed.len() > 1000,
+        "only {} pixels show arrows",
+        changed.len()
+    );
+    assert!(
+        changed
+            .iter()
+            .all(|c| *c == egui::Color32::from_rgb(15, 15, 15)),
+        "arrows are drawn in their colour"
+    );
+}

@@ -859,22 +859,33 @@ fn new_and_loaded_planets_keep_the_viewers_plugins() {
 
 #[test]
 fn a_triangle_rasterized_into_the_map_covers_the_pixels_inside_it() {
-    let (w, h) = (16usize, 8usize);
+    let (w, h) = (16usize, 16usize);
     let mut pixels = vec![egui::Color32::WHITE; w * h];
     let mut mesh = egui::Mesh::default();
     let red = egui::Color32::RED;
-    // Clockwise on the screen (y down); the fill must not depend on the winding.
-    mesh.colored_vertex(egui::pos2(0.0, 0.0), red);
-    mesh.colored_vertex(egui::pos2(8.0, 0.0), red);
-    mesh.colored_vertex(egui::pos2(0.0, 8.0), red);
+    // Inside the image, away from its borders; wound clockwise on the screen (y down): the
+    // fill must not depend on the winding.
+    // No edge along an axis, so that every edge decides some pixels of the bounding box.
+    let corners = [(1.0f32, 7.0f32), (14.0, 1.0), (9.0, 14.0)];
+    for (x, y) in corners {
+        mesh.colored_vertex(egui::pos2(x, y), red);
+    }
     mesh.add_triangle(0, 2, 1);
     map::rasterize_mesh(&mesh, w, h, &mut pixels);
+    // Left of each directed edge (clockwise corners, y down): the inside.
+    let side = |(ax, ay): (f32, f32), (bx, by): (f32, f32), (px, py): (f32, f32)| {
+        (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+    };
+    let mut filled = 0;
     for y in 0..h {
         for x in 0..w {
-            let inside = (x as f32 + 0.5) + (y as f32 + 0.5) <= 8.0;
+            let c = (x as f32 + 0.5, y as f32 + 0.5);
+            let inside = (0..3).all(|k| side(corners[k], corners[(k + 1) % 3], c) >= 0.0);
             assert_eq!(pixels[y * w + x] == red, inside, "pixel ({x}, {y})");
+            filled += usize::from(inside);
         }
     }
+    assert!(filled > 40, "{filled}");
 }
 
 #[test]

@@ -25,7 +25,8 @@ struct Globe {
 struct VsOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) uv: vec2<f32>,
-    @location(1) normal: vec3<f32>,
+    // Sunlight, per vertex (the grid is finer than the pixels it covers).
+    @location(1) lit: f32,
     @location(2) elevation_km: f32,
 };
 
@@ -46,18 +47,49 @@ fn vs_main(@location(0) lat_lon: vec2<f32>) -> VsOut {
     var out: VsOut;
     out.clip = globe.view_proj * vec4<f32>(dir * r, 1.0);
     out.uv = uv;
-    out.normal = dir;
+    out.lit = 0.30 + 0.70 * max(dot(dir, globe.light_dir.xyz), 0.0);
     out.elevation_km = e;
     return out;
 }
 
 @fragment
 fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
-    var c = textureSample(colour_tex, colour_sampler, in.uv).rgb;
+    // One texel load (nearest) instead of a filtered sample: the texture is about as fine as
+    // the screen, and a software rasteriser pays for every tap.
+    let dims = vec2<i32>(textureDimensions(colour_tex));
+    let texel = clamp(vec2<i32>(in.uv * vec2<f32>(dims)), vec2<i32>(0, 0), dims - vec2<i32>(1, 1));
+    var c = textureLoad(colour_tex, texel, 0).rgb;
     if (globe.params.y > 0.5 && in.elevation_km < 0.0) {
         let depth = clamp(-in.elevation_km / 8.0, 0.0, 1.0);
         c = mix(c, vec3<f32>(0.04, 0.16, 0.40), 0.30 + 0.45 * depth);
     }
-    let lit = 0.30 + 0.70 * max(dot(normalize(in.normal), globe.light_dir.xyz), 0.0);
-    return vec4<f32>(c * lit, 1.0);
+    return vec4<f32>(c * in.lit, 1.0);
+}
+
+// The flat map (the viewer's 2D view): a quad over the paint callback's viewport, coloured from
+// the same texture, texel by texel (nearest) and without blending, which keeps a software
+// rasteriser's work per pixel to one load and one store.
+struct MapOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) uv: vec2<f32>,
+};
+
+@vertex
+fn vs_map(@builtin(vertex_index) i: u32) -> MapOut {
+    var corners = array<vec2<f32>, 6>(
+        vec2<f32>(0.0, 0.0), vec2<f32>(1.0, 0.0), vec2<f32>(1.0, 1.0),
+        vec2<f32>(0.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(0.0, 1.0),
+    );
+    let c = corners[i];
+    var out: MapOut;
+    out.clip = vec4<f32>(c.x * 2.0 - 1.0, 1.0 - c.y * 2.0, 0.0, 1.0);
+    out.uv = c;
+    return out;
+}
+
+@fragment
+fn fs_map(in: MapOut) -> @location(0) vec4<f32> {
+    let dims = vec2<i32>(textureDimensions(colour_tex));
+    let texel = clamp(vec2<i32>(in.uv * vec2<f32>(dims)), vec2<i32>(0, 0), dims - vec2<i32>(1, 1));
+    return vec4<f32>(textureLoad(colour_tex, texel, 0).rgb, 1.0);
 }

@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 use crate::components::{Plate, PlateFrame, PlateMesh, PlateMotion};
 use crate::geometry::SphereMesh;
 use crate::geometry::spherical::{angle_between, from_lat_lon_deg};
-use crate::io::params::Params;
+use crate::io::params::{ParamValue, Params};
 use crate::io::save::CommandHistory;
 use crate::random::{hash3, stream};
 use crate::resources::{Crust, CrustType, Orogeny, ResampleRequest};
@@ -153,6 +153,49 @@ pub enum Command {
         /// On or off.
         enabled: bool,
     },
+    /// Sets one parameter of the running planet, checked as in a parameter file: a core key
+    /// such as `continent.erosion_mm_per_yr`, or a plugin key `plugins.…` (see `planet
+    /// params`). `[planet]` and `[init]` keys only mean something when a planet is built and
+    /// are refused.
+    SetParam {
+        /// The parameter's key.
+        key: String,
+        /// Its new value.
+        value: SettingValue,
+    },
+}
+
+/// A parameter value in a command (a number or a flag; integers are accepted for real
+/// parameters, as in parameter files).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum SettingValue {
+    /// A flag.
+    Bool(bool),
+    /// A non-negative integer.
+    Int(u64),
+    /// A real number.
+    Float(f64),
+}
+
+impl From<SettingValue> for ParamValue {
+    fn from(v: SettingValue) -> Self {
+        match v {
+            SettingValue::Bool(b) => ParamValue::Bool(b),
+            SettingValue::Int(n) => ParamValue::Int(n),
+            SettingValue::Float(x) => ParamValue::Float(x),
+        }
+    }
+}
+
+impl From<ParamValue> for SettingValue {
+    fn from(v: ParamValue) -> Self {
+        match v {
+            ParamValue::Bool(b) => SettingValue::Bool(b),
+            ParamValue::Int(n) => SettingValue::Int(n),
+            ParamValue::Float(x) => SettingValue::Float(x),
+        }
+    }
 }
 
 /// What a command did, for reports.
@@ -180,6 +223,11 @@ pub enum Outcome {
     },
     /// A phenomenon was switched.
     Phenomenon,
+    /// A parameter was set.
+    Param {
+        /// Its key.
+        key: String,
+    },
 }
 
 fn bad(msg: String) -> SimError {
@@ -265,6 +313,20 @@ impl Command {
                 }
             }
             Command::SetPhenomenon { .. } => {}
+            Command::SetParam { key, value } => {
+                if key.starts_with("planet.") || key.starts_with("init.") {
+                    return Err(bad(format!(
+                        "set_param: {key} only applies when a planet is built (start a new planet)"
+                    )));
+                }
+                // Plugin keys are checked against the planet's plugins when applied.
+                if !key.starts_with("plugins.") {
+                    let mut p = params.clone();
+                    p.set(key, (*value).into())
+                        .and_then(|()| p.validate())
+                        .map_err(|e| bad(format!("set_param: {e}")))?;
+                }
+            }
         }
         Ok(())
     }
@@ -501,6 +563,22 @@ impl Simulation {
             Command::SetPhenomenon { name, enabled } => {
                 self.set_enabled(name, *enabled)?;
                 Outcome::Phenomenon
+            }
+            Command::SetParam { key, value } => {
+                let value = ParamValue::from(*value);
+                if key.starts_with("plugins.") {
+                    self.plugin_params_mut()
+                        .set(key, value)
+                        .map_err(|e| bad(format!("set_param: {e}")))?;
+                } else {
+                    // Checked by `validate` above.
+                    let mut p = self.params().clone();
+                    p.set(key, value)
+                        .and_then(|()| p.validate())
+                        .map_err(|e| bad(format!("set_param: {e}")))?;
+                    *self.world_mut().resource_mut::<Params>() = p;
+                }
+                Outcome::Param { key: key.clone() }
             }
         };
         let step = self.clock().step;

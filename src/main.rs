@@ -63,6 +63,10 @@ struct ViewArgs {
     /// Write a PNG screenshot of the window before exiting (needs --exit-after-steps).
     #[arg(long, value_name = "FILE", requires = "exit_after_steps")]
     screenshot: Option<PathBuf>,
+    /// Measure the frame rate: run the simulation, exit after N frames drawn while it steps,
+    /// and print the median and 90th-percentile frame times.
+    #[arg(long, value_name = "N", conflicts_with = "exit_after_steps")]
+    fps_report: Option<u64>,
     /// Window width and height in pixels.
     #[arg(long, value_name = "WxH", default_value = "1280x800")]
     window: String,
@@ -529,6 +533,7 @@ fn describe(o: &Outcome) -> String {
         Outcome::Rift { fragments } => format!("rift into plates {fragments:?}"),
         Outcome::Uplift { samples } => format!("{samples} samples raised or lowered"),
         Outcome::Phenomenon => "phenomenon switched".into(),
+        Outcome::Param { key } => format!("{key} set"),
     }
 }
 
@@ -963,6 +968,10 @@ fn view(a: ViewArgs) -> Result<()> {
         exit_after_steps: a.exit_after_steps,
         screenshot: a.screenshot.clone(),
         globe: a.globe,
+        fps_report: match a.fps_report {
+            Some(0) => bail!("--fps-report needs at least 1 frame"),
+            n => n,
+        },
         steps_per_second: match a.speed {
             Some(s) if !s.is_finite() || s <= 0.0 => {
                 bail!("--speed must be a positive number of steps per second, got {s}")
@@ -975,6 +984,26 @@ fn view(a: ViewArgs) -> Result<()> {
             .map_err(anyhow::Error::msg)?,
     };
     let report = tectonic_planets::viewer::run(build, opts)?;
+    if a.fps_report.is_some() {
+        let show = |p: Option<tectonic_planets::viewer::Percentiles>| {
+            p.map_or("–".to_string(), |p| {
+                format!("median {:.1} ms, p90 {:.1} ms", p.median, p.p90)
+            })
+        };
+        println!(
+            "fps report: {} samples, window {}x{}, {} frames while stepping, {} steps, {} snapshots",
+            report.samples, w, h, report.running_frames, report.steps, report.snapshots
+        );
+        println!("  frame interval: {}", show(report.frame_ms));
+        if let Some(p) = report.frame_ms {
+            println!("  fps (1 / median interval): {:.1}", 1e3 / p.median);
+        }
+        if let Some(f) = report.running_fps {
+            println!("  fps (frames / seconds):    {f:.1}");
+        }
+        println!("  app UI code:    {}", show(report.ui_ms));
+        println!("  eframe CPU:     {}", show(report.cpu_ms));
+    }
     if a.exit_after_steps.is_some() {
         eprintln!(
             "viewer: {} samples, {} steps, {} frames while stepping ({})",

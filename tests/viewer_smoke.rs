@@ -122,6 +122,53 @@ fn view_steps_writes_a_screenshot_and_exits_under_xvfb() {
 }
 
 #[test]
+fn fps_report_measures_frames_while_stepping_under_xvfb() {
+    if !have("xvfb-run") {
+        if std::env::var("CI").is_ok_and(|v| v == "true") {
+            panic!("xvfb-run is missing on CI: install the `xvfb` package (.ci/run does)");
+        }
+        eprintln!("SKIPPED: xvfb-run is not installed; the frame-rate report did not run");
+        return;
+    }
+    let dir = temp_dir("fps");
+    let runtime = dir.join("xdg");
+    std::fs::create_dir_all(&runtime).unwrap();
+    let mut cmd = Command::new("xvfb-run");
+    cmd.args(["-a", "-s", "-screen 0 1280x800x24"])
+        .arg(env!("CARGO_BIN_EXE_planet"))
+        .args(["view", "--samples", "2000", "--plates", "6"])
+        .args(["--fps-report", "20"])
+        .env("XDG_RUNTIME_DIR", &runtime)
+        .env_remove("WAYLAND_DISPLAY");
+    let (ok, out) = run_with_limit(cmd, Duration::from_secs(300));
+    assert!(ok, "planet view --fps-report failed:\n{out}");
+    // The figure itself depends on the machine; the report must be there and name 20+ frames.
+    let line = out
+        .lines()
+        .find(|l| l.starts_with("fps report:"))
+        .unwrap_or_else(|| panic!("no report:\n{out}"));
+    let frames: u64 = line
+        .split(", ")
+        .find_map(|part| part.strip_suffix(" frames while stepping"))
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no frame count in \"{line}\""));
+    assert!(frames >= 20, "{line}");
+    assert!(out.contains("frame interval: median"), "{out}");
+}
+
+#[test]
+fn fps_report_of_zero_frames_is_refused() {
+    let out = Command::new(env!("CARGO_BIN_EXE_planet"))
+        .args(["view", "--samples", "2000", "--fps-report", "0"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--fps-report"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
 fn view_without_a_display_fails_with_a_clear_message() {
     let out = Command::new(env!("CARGO_BIN_EXE_planet"))
         .args([

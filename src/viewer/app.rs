@@ -19,6 +19,12 @@ use crate::plugins::TectonicSystems;
 use super::map::{self, BaseLayer, VectorLayers};
 use super::worker::{Request, SimHandle, Snapshot};
 
+/// Least time between two frames while the simulation runs (60 frames per second at most).
+pub const FRAME_INTERVAL: std::time::Duration = std::time::Duration::from_micros(16_667);
+
+/// Width of the maps "Export maps" writes, pixels (the height is half).
+pub const EXPORT_MAP_WIDTH: u32 = 2048;
+
 /// What a click on the map does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Tool {
@@ -50,6 +56,9 @@ pub struct ExitPlan {
     pub after_steps: u64,
     /// Where to write the screenshot (PNG).
     pub screenshot: Option<PathBuf>,
+    /// Instead of a step count: run until this many frames were drawn while stepping, then
+    /// exit (the frame-time measurement of `planet view --fps-report N`).
+    pub after_running_frames: Option<u64>,
     frames_after_done: u32,
     requested: bool,
     started: Instant,
@@ -61,6 +70,7 @@ impl ExitPlan {
         Self {
             after_steps,
             screenshot,
+            after_running_frames: None,
             frames_after_done: 0,
             requested: false,
             started: Instant::now(),
@@ -75,8 +85,44 @@ pub struct FrameStats {
     pub running_frames: u64,
     /// Seconds spent drawing those frames (from the first to the last).
     pub running_secs: f64,
+    /// Keep every frame's times (below; for `--fps-report`, which ends the session).
+    pub record_frame_times: bool,
+    /// Time from the previous frame to this one, ms, for every frame drawn while running.
+    pub running_intervals_ms: Vec<f64>,
+    /// Time spent in the app's UI code (layout, our painting), ms, per frame while running.
+    pub running_ui_ms: Vec<f64>,
+    /// The whole frame's CPU time on the UI thread as eframe reports it (UI, tessellation,
+    /// rendering, present), ms, per frame while running.
+    pub running_cpu_ms: Vec<f64>,
+    /// New snapshots shown while running.
+    pub running_snapshots: u64,
     last_running: Option<Instant>,
     recent: std::collections::VecDeque<Instant>,
+}
+
+/// Median and 90th percentile of some frame times, ms.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Percentiles {
+    /// Median.
+    pub median: f64,
+    /// 90th percentile.
+    pub p90: f64,
+}
+
+impl Percentiles {
+    /// Of `v` (`None` when empty).
+    pub fn of(v: &[f64]) -> Option<Self> {
+        if v.is_empty() {
+            return None;
+        }
+        let mut s = v.to_vec();
+        s.sort_by(f64::total_cmp);
+        let at = |q: f64| s[((s.len() - 1) as f64 * q).round() as usize];
+        Some(Self {
+            median: at(0.5),
+            p90: at(0.9),
+        })
+    }
 }
 
 impl FrameStats {
@@ -92,8 +138,12 @@ impl FrameStats {
         }
         if running {
             if let Some(t) = self.last_running {
-                self.running_secs += now.duration_since(t).as_secs_f64();
+                let dt = now.duration_since(t).as_secs_f64();
+                self.running_secs += dt;
                 self.running_frames += 1;
+                if self.record_frame_times {
+                    self.running_intervals_ms.push(dt * 1e3);
+                }
             }
             self.last_running = Some(now);
         } else {
@@ -124,7 +174,7 @@ pub struct ViewerApp {
     /// The image the map texture holds now (what is drawn).
     pub map_image: Option<Arc<ColorImage>>,
     map_tex: Option<TextureHandle>,
-    drawn: Option<(usize, BaseLayer)>,
+    drawn: Option<MapKey>,
     /// The selected plate.
     pub selected: Option<u32>,
     /// The motion edit fields.
@@ -168,13 +218,23 @@ pub struct ViewerApp {
     /// Whether the globe's GPU objects exist (the wgpu renderer is running).
     pub globe_ready: bool,
     map_generation: u64,
-    map_elevation: Arc<Vec<f32>>,
+    globe_data: Option<Arc<super::globe::GlobeData>>,
+    style_set: bool,
     painter: Option<MapPainter>,
 }
 
-/// A map to colour: a snapshot and a base layer (and the elevation grid for the globe).
+/// What a coloured map shows: the snapshot (by address), the base layer, and the vector layers
+/// drawn into the globe's texture (none without the wgpu renderer: egui paints them).
+type MapKey = (usize, BaseLayer, VectorLayers);
+
+/// Width of the map on the screen the vector glyphs are laid out for, pixels (their spacing
+/// and line widths scale from it to the texture).
+const GLYPH_LAYOUT_WIDTH: f32 = 690.0;
+
+/// A map to colour: a snapshot and a base layer (and, for the wgpu renderer, the elevation
+/// grid and the vector layers drawn into the texture).
 struct PaintJob {
-    key: (usize, BaseLayer),
+    key: MapKey,
     snap: Arc<Snapshot>,
     layer: BaseLayer,
     elevation: bool,
@@ -182,28 +242,39 @@ struct PaintJob {
 
 /// A coloured map.
 struct Painted {
-    key: (usize, BaseLayer),
+    key: MapKey,
     image: Arc<ColorImage>,
-    elevation_km: Option<Arc<Vec<f32>>>,
+    globe: Option<Arc<super::globe::GlobeData>>,
 }
 
 fn paint_job(job: PaintJob) -> Painted {
     let s = &job.snap;
     let image = Arc::new(map::render_base(s, job.layer));
-    let elevation_km = job.elevation.then(|| {
+    let globe = job.elevation.then(|| {
         use rayon::prelude::*;
         let lk = &s.lookup;
-        Arc::new(
-            (0..lk.corners.len())
-                .into_par_iter()
-                .map(|i| lk.lerp(&s.crust.elevation_km, i))
-                .collect(),
-        )
+        let elevation_km = (0..lk.corners.len())
+            .into_par_iter()
+            .map(|i| lk.lerp(&s.crust.elevation_km, i))
+            .collect();
+        // The vector layers are drawn into the texture here, once per snapshot, instead of as
+        // thousands of triangles in every frame.
+        let layers = job.key.2;
+        if layers == VectorLayers::default() {
+            Arc::new(super::globe::GlobeData::new(&image, elevation_km))
+        } else {
+            let mut with = (*image).clone();
+            let [w, h] = with.size;
+            let rect = Rect::from_min_size(egui::Pos2::ZERO, Vec2::new(w as f32, h as f32));
+            let mesh = map::vector_mesh(rect, s, layers, w as f32 / GLYPH_LAYOUT_WIDTH);
+            map::rasterize_mesh(&mesh, w, h, &mut with.pixels);
+            Arc::new(super::globe::GlobeData::new(&with, elevation_km))
+        }
     });
     Painted {
         key: job.key,
         image,
-        elevation_km,
+        globe,
     }
 }
 
@@ -248,14 +319,17 @@ impl ViewerApp {
             sea_surface: true,
             globe_ready: false,
             map_generation: 0,
-            map_elevation: Arc::default(),
+            globe_data: None,
+            style_set: false,
             painter: None,
         }
     }
 
     /// Sets an exit plan and starts running the simulation toward it.
     pub fn with_exit_plan(mut self, plan: ExitPlan) -> Self {
-        if plan.after_steps > 0 {
+        if plan.after_running_frames.is_some() {
+            self.sim.send(Request::Run);
+        } else if plan.after_steps > 0 {
             self.sim.send(Request::RunSteps(plan.after_steps));
         }
         self.exit = Some(plan);
@@ -285,6 +359,9 @@ impl ViewerApp {
             {
                 self.param_text = param_texts(&s);
             }
+            if s.running {
+                self.frames.running_snapshots += 1;
+            }
             if let Some(id) = self.selected
                 && s.plate(id).is_none()
             {
@@ -297,6 +374,14 @@ impl ViewerApp {
 
     /// The whole UI, inside the root `ui`.
     pub fn root_ui(&mut self, ui: &mut egui::Ui) {
+        if !self.style_set {
+            // Panels are not filled: the frame is cleared to their colour instead (see
+            // `clear_color`), so each pixel is shaded once less. On a software rasteriser the
+            // panel fills were the largest share of a frame.
+            self.style_set = true;
+            ui.ctx()
+                .global_style_mut(|s| s.visuals.panel_fill = Color32::TRANSPARENT);
+        }
         self.poll();
         let running = self.snap.as_ref().is_some_and(|s| s.running);
         self.frames.tick(running);
@@ -333,7 +418,9 @@ impl ViewerApp {
             }
         });
         if running {
-            ui.ctx().request_repaint();
+            // A steady frame rate while stepping (new snapshots also ask for a frame), not a
+            // busy loop.
+            ui.ctx().request_repaint_after(FRAME_INTERVAL);
         }
     }
 
@@ -342,6 +429,18 @@ impl ViewerApp {
             return;
         };
         let Some(s) = self.snap.clone() else { return };
+        if let Some(n) = plan.after_running_frames {
+            if self.frames.running_frames >= n {
+                ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            } else if plan.started.elapsed().as_secs() > 1200 {
+                set_error(
+                    &self.exit_error,
+                    format!("fewer than {n} frames were drawn within 1200 s"),
+                );
+                ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            }
+            return;
+        }
         if plan.started.elapsed().as_secs() > 600 {
             set_error(
                 &self.exit_error,
@@ -352,7 +451,7 @@ impl ViewerApp {
         }
         let drawn_now = self
             .drawn
-            .is_some_and(|(p, _)| p == Arc::as_ptr(&s) as usize);
+            .is_some_and(|(p, _, _)| p == Arc::as_ptr(&s) as usize);
         if s.steps_taken < plan.after_steps || s.running || !drawn_now {
             return;
         }
@@ -528,12 +627,17 @@ impl ViewerApp {
     /// Rebuilds the map image when the snapshot or the base layer changed.
     pub fn refresh_map(&mut self, ctx: &egui::Context) {
         let Some(s) = self.snap.clone() else { return };
-        let key = (Arc::as_ptr(&s) as usize, self.base);
+        let drawn_layers = if self.globe_ready {
+            self.layers
+        } else {
+            VectorLayers::default()
+        };
+        let key = (Arc::as_ptr(&s) as usize, self.base, drawn_layers);
         // With a painter thread: install what it finished, and give it the next job when idle.
         if let Some(p) = self.painter.as_mut() {
             if let Ok(done) = p.rx.try_recv() {
                 p.busy = false;
-                self.install_map(ctx, done.key, done.image, done.elevation_km);
+                self.install_map(ctx, done.key, done.image, done.globe);
             }
             let p = self.painter.as_mut().expect("painter checked above");
             if !p.busy && self.drawn != Some(key) {
@@ -557,24 +661,29 @@ impl ViewerApp {
             layer: self.base,
             elevation: self.globe_ready,
         });
-        self.install_map(ctx, done.key, done.image, done.elevation_km);
+        self.install_map(ctx, done.key, done.image, done.globe);
     }
 
     fn install_map(
         &mut self,
         ctx: &egui::Context,
-        key: (usize, BaseLayer),
+        key: MapKey,
         img: Arc<ColorImage>,
-        elevation_km: Option<Arc<Vec<f32>>>,
+        globe: Option<Arc<super::globe::GlobeData>>,
     ) {
-        match &mut self.map_tex {
-            Some(t) => t.set(img.clone(), TextureOptions::LINEAR),
-            None => {
-                self.map_tex = Some(ctx.load_texture("map", img.clone(), TextureOptions::LINEAR))
+        // With the wgpu renderer the map is drawn from the globe's textures (uploaded by its
+        // paint callback); egui's texture is only for the other renderers and headless runs.
+        if !self.globe_ready {
+            match &mut self.map_tex {
+                Some(t) => t.set(img.clone(), TextureOptions::LINEAR),
+                None => {
+                    self.map_tex =
+                        Some(ctx.load_texture("map", img.clone(), TextureOptions::LINEAR))
+                }
             }
         }
-        if let Some(e) = elevation_km {
-            self.map_elevation = e;
+        if globe.is_some() {
+            self.globe_data = globe;
         }
         self.map_image = Some(img);
         self.map_generation += 1;
@@ -624,7 +733,19 @@ impl ViewerApp {
         let (rect, resp) = ui.allocate_exact_size(Vec2::new(w, w / 2.0), Sense::click());
         self.track("map", &resp);
         let painter = ui.painter_at(rect);
-        if let Some(t) = &self.map_tex {
+        if self.globe_ready
+            && let Some(data) = self.globe_data.clone()
+        {
+            // With the wgpu renderer the map is one quad of the globe's pipeline (cheaper per
+            // pixel than an egui image on a software rasteriser).
+            painter.add(super::globe::map_callback(
+                rect,
+                super::globe::MapCallback {
+                    generation: self.map_generation,
+                    data,
+                },
+            ));
+        } else if let Some(t) = &self.map_tex {
             painter.image(
                 t.id(),
                 rect,
@@ -632,7 +753,10 @@ impl ViewerApp {
                 Color32::WHITE,
             );
         }
-        map::paint_vectors(&painter, rect, &s, self.layers);
+        if !self.globe_ready {
+            // With the wgpu renderer they are in the texture.
+            map::paint_vectors(&painter, rect, &s, self.layers);
+        }
         // Selected plate: its pole and its centroid.
         if let Some(p) = self.selected.and_then(|id| s.plate(id)) {
             let c = map::to_screen(rect, p.centroid_world);
@@ -722,6 +846,21 @@ impl ViewerApp {
                 self.camera.pitch = (self.camera.pitch + d.y * 0.006).clamp(-1.55, 1.55);
             }
         }
+        if resp.drag_stopped()
+            && self.tool == Tool::PickPole
+            && let Some(e) = self.edit
+        {
+            // Releasing the dragged pole applies it (through the command API).
+            self.sim.send(Request::Apply(Command::SetMotion {
+                plate: PlateRef::Id(e.plate),
+                pole: LatLon {
+                    lat: e.pole_lat,
+                    lon: e.pole_lon,
+                },
+                speed_mm_per_yr: e.speed_mm_per_yr,
+            }));
+            self.tool = Tool::Select;
+        }
         if resp.hovered() {
             let scroll = ui.input(|i| i.smooth_scroll_delta.y);
             if scroll != 0.0 {
@@ -746,7 +885,7 @@ impl ViewerApp {
             );
             return;
         }
-        let Some(img) = self.map_image.clone() else {
+        let Some(data) = self.globe_data.clone() else {
             return;
         };
         let eye = self.camera.eye().normalize();
@@ -767,8 +906,7 @@ impl ViewerApp {
             super::globe::GlobeCallback {
                 uniforms,
                 generation: self.map_generation,
-                colours: img,
-                elevation_km: self.map_elevation.clone(),
+                data,
             },
         ));
     }
@@ -922,9 +1060,26 @@ impl ViewerApp {
     /// Every core and plugin parameter with its unit and range; checked before it is sent.
     pub fn params_ui(&mut self, ui: &mut egui::Ui) {
         let Some(s) = self.snap.clone() else { return };
-        egui::CollapsingHeader::new("Parameters")
+        let shown = egui::CollapsingHeader::new("Parameters")
             .default_open(false)
             .show(ui, |ui| {
+                if let Some(e) = self.param_errors.get("") {
+                    ui.colored_label(Color32::from_rgb(230, 80, 60), e);
+                }
+                ui.horizontal(|ui| {
+                    let r = ui.button("Apply to this planet");
+                    self.track("params:apply", &r);
+                    if r.clicked() {
+                        self.apply_params(&s, false);
+                    }
+                    if ui.button("New planet").clicked() {
+                        self.apply_params(&s, true);
+                    }
+                    if ui.button("Revert").clicked() {
+                        self.param_text = param_texts(&s);
+                        self.param_errors.clear();
+                    }
+                });
                 let mut section = "";
                 let specs: Vec<crate::io::params::ParamSpec> = Params::schema()
                     .iter()
@@ -938,38 +1093,30 @@ impl ViewerApp {
                     }
                     ui.horizontal(|ui| {
                         let text = self.param_text.entry(spec.key.to_string()).or_default();
-                        ui.add(egui::TextEdit::singleline(text).desired_width(80.0))
+                        let r = ui
+                            .add(egui::TextEdit::singleline(text).desired_width(80.0))
                             .on_hover_text(format!(
                                 "{}\nrange {}..={}, default {}",
                                 spec.doc, spec.min, spec.max, spec.default
                             ));
+                        self.rects.insert(format!("param:{}", spec.key), r.rect);
                         ui.label(format!("{} {}", spec.name, spec.unit));
                     });
                     if let Some(e) = self.param_errors.get(spec.key) {
                         ui.colored_label(Color32::from_rgb(230, 80, 60), e);
                     }
                 }
-                ui.horizontal(|ui| {
-                    if ui.button("Apply to this planet").clicked() {
-                        self.apply_params(&s, false);
-                    }
-                    if ui.button("New planet").clicked() {
-                        self.apply_params(&s, true);
-                    }
-                    if ui.button("Revert").clicked() {
-                        self.param_text = param_texts(&s);
-                        self.param_errors.clear();
-                    }
-                });
             });
+        self.track("params:header", &shown.header_response);
     }
 
-    /// Checks the parameter fields; sends them when all are valid (to the running planet, or
-    /// as a new planet). Returns whether they were sent.
+    /// Checks the parameter fields; sends them when all are valid: to the running planet as
+    /// one `set_param` command per changed key (recorded in the history), or as a new planet.
+    /// Returns whether they were sent; otherwise `param_errors` says why, by key.
     pub fn apply_params(&mut self, s: &Snapshot, new_planet: bool) -> bool {
         self.param_errors.clear();
         let mut params = s.params.clone();
-        let mut plugin_changes = Vec::new();
+        let mut changes = Vec::new();
         for (key, text) in &self.param_text {
             let spec = Params::schema()
                 .iter()
@@ -979,39 +1126,65 @@ impl ViewerApp {
             let value = match parse_value(spec.kind, text) {
                 Ok(v) => v,
                 Err(e) => {
-                    self.param_errors.insert(key.clone(), e);
+                    self.param_errors.insert(key.clone(), format!("{key}: {e}"));
                     continue;
                 }
             };
             if key.starts_with("plugins.") {
                 let current = s.plugin_params.iter().find(|p| p.spec.key == key);
-                if let Err(e) = crate::io::params::check_value(spec, bounds(spec), value) {
-                    self.param_errors.insert(key.clone(), e.to_string());
-                } else if current.is_some_and(|c| c.value != value) {
-                    plugin_changes.push((key.clone(), value));
+                match crate::io::params::check_value(spec, bounds(spec), value) {
+                    Err(e) => {
+                        self.param_errors.insert(key.clone(), e.to_string());
+                    }
+                    Ok(v) if current.is_some_and(|c| c.value != v) => {
+                        changes.push((key.clone(), v));
+                    }
+                    Ok(_) => {}
                 }
             } else if let Err(e) = params.set(key, value) {
                 self.param_errors.insert(key.clone(), e.to_string());
+            } else if params.get(key) != s.params.get(key) {
+                if !new_planet && (key.starts_with("planet.") || key.starts_with("init.")) {
+                    self.param_errors.insert(
+                        key.clone(),
+                        format!("{key} only applies to a new planet (press \"New planet\")"),
+                    );
+                } else if let Some(v) = params.get(key) {
+                    changes.push((key.clone(), v));
+                }
             }
         }
         if self.param_errors.is_empty()
             && let Err(e) = params.validate()
         {
             self.param_errors.insert("".into(), e.to_string());
-            self.status = e.to_string();
         }
         if !self.param_errors.is_empty() {
-            self.status = format!("{} parameter(s) refused", self.param_errors.len());
+            self.status = format!(
+                "{} parameter(s) refused: {}",
+                self.param_errors.len(),
+                self.param_errors.values().next().map_or("", |e| e.as_str())
+            );
             return false;
         }
         if new_planet {
+            let plugin_changes: Vec<_> = changes
+                .into_iter()
+                .filter(|(k, _)| k.starts_with("plugins."))
+                .collect();
             self.sim.send(Request::NewPlanet(Box::new(params)));
+            for (k, v) in plugin_changes {
+                self.sim.send(Request::SetPluginParam(k, v));
+            }
         } else {
-            self.sim.send(Request::SetParams(Box::new(params)));
+            for (key, v) in changes {
+                self.sim.send(Request::Apply(Command::SetParam {
+                    key,
+                    value: v.into(),
+                }));
+            }
         }
-        for (k, v) in plugin_changes {
-            self.sim.send(Request::SetPluginParam(k, v));
-        }
+        self.status.clear();
         true
     }
 
@@ -1022,10 +1195,14 @@ impl ViewerApp {
             ui.text_edit_singleline(&mut self.file_path);
         });
         ui.horizontal(|ui| {
-            if ui.button("Save").clicked() {
+            let r = ui.button("Save");
+            self.track("save", &r);
+            if r.clicked() {
                 self.sim.send(Request::Save(PathBuf::from(&self.file_path)));
             }
-            if ui.button("Load").clicked() {
+            let r = ui.button("Load");
+            self.track("load", &r);
+            if r.clicked() {
                 self.sim.send(Request::Load(PathBuf::from(&self.file_path)));
             }
         });
@@ -1034,11 +1211,17 @@ impl ViewerApp {
             ui.text_edit_singleline(&mut self.export_dir);
         });
         ui.horizontal(|ui| {
-            if ui.button("Export maps (PNG)").clicked() {
-                self.sim
-                    .send(Request::ExportMaps(PathBuf::from(&self.export_dir), 2048));
+            let r = ui.button("Export maps (PNG)");
+            self.track("export_maps", &r);
+            if r.clicked() {
+                self.sim.send(Request::ExportMaps(
+                    PathBuf::from(&self.export_dir),
+                    EXPORT_MAP_WIDTH,
+                ));
             }
-            if ui.button("Export view (PNG)").clicked() {
+            let r = ui.button("Export view (PNG)");
+            self.track("export_view", &r);
+            if r.clicked() {
                 self.export_view(ui.ctx());
             }
         });
@@ -1180,8 +1363,24 @@ pub fn save_color_image(img: &ColorImage, path: &std::path::Path) -> Result<(), 
         .map_err(|e| format!("could not write {}: {e}", path.display()))
 }
 
+/// What the window is cleared to: the panels' colour (they are drawn without a fill).
+pub const BACKGROUND: Color32 = Color32::from_gray(27);
+
 impl eframe::App for ViewerApp {
-    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+    fn clear_color(&self, _visuals: &egui::Visuals) -> [f32; 4] {
+        BACKGROUND.to_normalized_gamma_f32()
+    }
+
+    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
+        let t = Instant::now();
         self.root_ui(ui);
+        if self.frames.record_frame_times && self.frames.last_running.is_some() {
+            self.frames
+                .running_ui_ms
+                .push(t.elapsed().as_secs_f64() * 1e3);
+            if let Some(cpu) = frame.info().cpu_usage {
+                self.frames.running_cpu_ms.push(cpu as f64 * 1e3);
+            }
+        }
     }
 }

@@ -14,7 +14,7 @@ use glam::{Mat4, Vec3};
 pub const GLOBE_WGSL: &str = include_str!("../../shaders/globe.wgsl");
 
 /// Grid resolution: longitude segments (latitude segments are half).
-const LON_SEGMENTS: u32 = 360;
+const LON_SEGMENTS: u32 = 256;
 
 /// Uniforms; keep in sync with `Globe` in shaders/globe.wgsl.
 #[repr(C)]
@@ -86,6 +86,7 @@ impl Camera {
 /// GPU objects of the globe (kept in egui-wgpu's callback resources).
 struct GlobeResources {
     pipeline: wgpu::RenderPipeline,
+    map_pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
     uniforms: wgpu::Buffer,
     sampler: wgpu::Sampler,
@@ -178,6 +179,29 @@ pub fn init(rs: &RenderState) {
         multiview_mask: None,
         cache: None,
     });
+    // The flat map: one quad over the callback's rectangle, the colours read texel by texel
+    // (no filtering, no blending: the cheapest fragments a software rasteriser can draw).
+    let map_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("map"),
+        layout: Some(&pl),
+        vertex: wgpu::VertexState {
+            module: &shader,
+            entry_point: Some("vs_map"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        fragment: Some(wgpu::FragmentState {
+            module: &shader,
+            entry_point: Some("fs_map"),
+            compilation_options: Default::default(),
+            targets: &[Some(rs.target_format.into())],
+        }),
+        primitive: wgpu::PrimitiveState::default(),
+        depth_stencil: None,
+        multisample: wgpu::MultisampleState::default(),
+        multiview_mask: None,
+        cache: None,
+    });
     let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("globe uniforms"),
         size: std::mem::size_of::<GlobeUniforms>() as u64,
@@ -208,6 +232,7 @@ pub fn init(rs: &RenderState) {
         .callback_resources
         .insert(GlobeResources {
             pipeline,
+            map_pipeline,
             layout,
             uniforms,
             sampler,
@@ -248,16 +273,42 @@ pub fn grid_sphere(lon_segments: u32) -> (Vec<[f32; 2]>, Vec<u32>) {
     (v, idx)
 }
 
+/// What the globe's textures hold: the overlay colours (RGBA8, sRGB) and the elevation (km)
+/// of the equirectangular grid. Made off the UI thread when a new snapshot or overlay
+/// arrives, and uploaded once per change (two texture writes).
+#[derive(Debug, Default)]
+pub struct GlobeData {
+    /// Width and height of the grid, pixels.
+    pub size: [usize; 2],
+    /// Overlay colour per pixel, RGBA8 (sRGB, unmultiplied), rows north to south.
+    pub rgba: Vec<u8>,
+    /// Elevation per pixel, km.
+    pub elevation_km: Vec<f32>,
+}
+
+impl GlobeData {
+    /// The data of a coloured map and its elevation grid.
+    pub fn new(colours: &egui::ColorImage, elevation_km: Vec<f32>) -> Self {
+        let mut rgba = Vec::with_capacity(colours.pixels.len() * 4);
+        for p in &colours.pixels {
+            rgba.extend_from_slice(&p.to_srgba_unmultiplied());
+        }
+        Self {
+            size: colours.size,
+            rgba,
+            elevation_km,
+        }
+    }
+}
+
 /// One frame's globe: the camera, the look, and (when new) the textures to upload.
 pub struct GlobeCallback {
     /// Uniforms for this frame (the aspect ratio comes from the rect).
     pub uniforms: GlobeUniforms,
     /// Identifies the texture contents; uploaded when it changes.
     pub generation: u64,
-    /// Overlay colours.
-    pub colours: Arc<egui::ColorImage>,
-    /// Elevation per pixel, km.
-    pub elevation_km: Arc<Vec<f32>>,
+    /// The texture contents.
+    pub data: Arc<GlobeData>,
 }
 
 impl CallbackTrait for GlobeCallback {
@@ -273,88 +324,7 @@ impl CallbackTrait for GlobeCallback {
             return Vec::new();
         };
         queue.write_buffer(&r.uniforms, 0, bytemuck::bytes_of(&self.uniforms));
-        if r.uploaded != self.generation || r.bind_group.is_none() {
-            let [w, h] = self.colours.size;
-            let size = wgpu::Extent3d {
-                width: w as u32,
-                height: h as u32,
-                depth_or_array_layers: 1,
-            };
-            let make = |format, label| {
-                device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size,
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                    view_formats: &[],
-                })
-            };
-            let same_size = r
-                .textures
-                .as_ref()
-                .is_some_and(|(c, _)| c.width() == w as u32 && c.height() == h as u32);
-            if !same_size {
-                r.textures = Some((
-                    make(wgpu::TextureFormat::Rgba8Unorm, "globe colours"),
-                    make(wgpu::TextureFormat::R32Float, "globe elevation"),
-                ));
-                r.bind_group = None;
-            }
-            if let Some((ct, et)) = &r.textures {
-                let rgba: Vec<u8> = self
-                    .colours
-                    .pixels
-                    .iter()
-                    .flat_map(|p| p.to_srgba_unmultiplied())
-                    .collect();
-                let write = |t: &wgpu::Texture, data: &[u8], bpp: u32| {
-                    queue.write_texture(
-                        t.as_image_copy(),
-                        data,
-                        wgpu::TexelCopyBufferLayout {
-                            offset: 0,
-                            bytes_per_row: Some(w as u32 * bpp),
-                            rows_per_image: Some(h as u32),
-                        },
-                        size,
-                    );
-                };
-                write(ct, &rgba, 4);
-                if self.elevation_km.len() == w * h {
-                    write(et, bytemuck::cast_slice(&self.elevation_km), 4);
-                }
-                if r.bind_group.is_none() {
-                    let cv = ct.create_view(&Default::default());
-                    let ev = et.create_view(&Default::default());
-                    r.bind_group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
-                        label: Some("globe"),
-                        layout: &r.layout,
-                        entries: &[
-                            wgpu::BindGroupEntry {
-                                binding: 0,
-                                resource: r.uniforms.as_entire_binding(),
-                            },
-                            wgpu::BindGroupEntry {
-                                binding: 1,
-                                resource: wgpu::BindingResource::TextureView(&cv),
-                            },
-                            wgpu::BindGroupEntry {
-                                binding: 2,
-                                resource: wgpu::BindingResource::Sampler(&r.sampler),
-                            },
-                            wgpu::BindGroupEntry {
-                                binding: 3,
-                                resource: wgpu::BindingResource::TextureView(&ev),
-                            },
-                        ],
-                    }));
-                }
-            }
-            r.uploaded = self.generation;
-        }
+        upload(r, device, queue, self.generation, &self.data);
         Vec::new()
     }
 
@@ -374,6 +344,140 @@ impl CallbackTrait for GlobeCallback {
         pass.set_index_buffer(r.indices.slice(..), wgpu::IndexFormat::Uint32);
         pass.draw_indexed(0..r.index_count, 0, 0..1);
     }
+}
+
+/// Uploads `data` into the textures (made or remade at its size) unless `generation` is
+/// there already: one write per texture per new picture, nothing on other frames.
+fn upload(
+    r: &mut GlobeResources,
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    generation: u64,
+    data: &GlobeData,
+) {
+    if r.uploaded != generation || r.bind_group.is_none() {
+        let [w, h] = data.size;
+        if w == 0 || h == 0 || data.rgba.len() != w * h * 4 {
+            return;
+        }
+        let size = wgpu::Extent3d {
+            width: w as u32,
+            height: h as u32,
+            depth_or_array_layers: 1,
+        };
+        let make = |format, label| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            })
+        };
+        let same_size = r
+            .textures
+            .as_ref()
+            .is_some_and(|(c, _)| c.width() == w as u32 && c.height() == h as u32);
+        if !same_size {
+            r.textures = Some((
+                make(wgpu::TextureFormat::Rgba8Unorm, "globe colours"),
+                make(wgpu::TextureFormat::R32Float, "globe elevation"),
+            ));
+            r.bind_group = None;
+        }
+        if let Some((ct, et)) = &r.textures {
+            let write = |t: &wgpu::Texture, data: &[u8], bpp: u32| {
+                queue.write_texture(
+                    t.as_image_copy(),
+                    data,
+                    wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(w as u32 * bpp),
+                        rows_per_image: Some(h as u32),
+                    },
+                    size,
+                );
+            };
+            write(ct, &data.rgba, 4);
+            if data.elevation_km.len() == w * h {
+                write(et, bytemuck::cast_slice(&data.elevation_km), 4);
+            }
+            if r.bind_group.is_none() {
+                let cv = ct.create_view(&Default::default());
+                let ev = et.create_view(&Default::default());
+                r.bind_group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("globe"),
+                    layout: &r.layout,
+                    entries: &[
+                        wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: r.uniforms.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 1,
+                            resource: wgpu::BindingResource::TextureView(&cv),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: wgpu::BindingResource::Sampler(&r.sampler),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 3,
+                            resource: wgpu::BindingResource::TextureView(&ev),
+                        },
+                    ],
+                }));
+            }
+        }
+        r.uploaded = generation;
+    }
+}
+
+/// One frame's flat map (the 2D view), drawn from the same textures as the globe.
+pub struct MapCallback {
+    /// Identifies the texture contents; uploaded when it changes.
+    pub generation: u64,
+    /// The texture contents.
+    pub data: Arc<GlobeData>,
+}
+
+impl CallbackTrait for MapCallback {
+    fn prepare(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        _screen: &ScreenDescriptor,
+        _encoder: &mut wgpu::CommandEncoder,
+        resources: &mut CallbackResources,
+    ) -> Vec<wgpu::CommandBuffer> {
+        if let Some(r) = resources.get_mut::<GlobeResources>() {
+            upload(r, device, queue, self.generation, &self.data);
+        }
+        Vec::new()
+    }
+
+    fn paint(
+        &self,
+        _info: egui::PaintCallbackInfo,
+        pass: &mut wgpu::RenderPass<'static>,
+        resources: &CallbackResources,
+    ) {
+        let Some(r) = resources.get::<GlobeResources>() else {
+            return;
+        };
+        let Some(bg) = &r.bind_group else { return };
+        pass.set_pipeline(&r.map_pipeline);
+        pass.set_bind_group(0, bg, &[]);
+        pass.draw(0..6, 0..1);
+    }
+}
+
+/// The paint callback of the flat map for `rect`.
+pub fn map_callback(rect: egui::Rect, cb: MapCallback) -> egui::PaintCallback {
+    egui_wgpu::Callback::new_paint_callback(rect, cb)
 }
 
 /// The paint callback for `rect`.
@@ -401,7 +505,9 @@ mod tests {
             .map(|e| e.name.as_str())
             .collect();
         assert!(
-            names.contains(&"vs_main") && names.contains(&"fs_main"),
+            ["vs_main", "fs_main", "vs_map", "fs_map"]
+                .iter()
+                .all(|n| names.contains(n)),
             "{names:?}"
         );
         // The uniform block matches the host struct's size.

@@ -4,7 +4,7 @@
 //! arrows, subduction fronts and terranes from their entities) painted on top.
 
 use eframe::egui;
-use egui::{Color32, ColorImage, Pos2, Rect, Stroke, Vec2};
+use egui::{Color32, ColorImage, Pos2, Rect, Vec2};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -276,10 +276,80 @@ fn screen_dir(p: DVec3, v: DVec3) -> Vec2 {
     Vec2::new(v.dot(e) as f32, -(v.dot(n) as f32))
 }
 
-/// Paints the vector layers over the map drawn in `rect`.
-pub fn paint_vectors(painter: &egui::Painter, rect: Rect, s: &Snapshot, layers: VectorLayers) {
+/// Vector glyphs collected into one mesh (one draw, no per-shape tessellation).
+#[derive(Default)]
+pub struct GlyphBatch {
+    /// The triangles.
+    pub mesh: egui::Mesh,
+}
+
+impl GlyphBatch {
+    /// A segment `a`–`b` of width `w`.
+    pub fn line(&mut self, a: Pos2, b: Pos2, w: f32, colour: Color32) {
+        let d = b - a;
+        let len = d.length();
+        if len < 1e-3 {
+            return;
+        }
+        let n = Vec2::new(-d.y, d.x) * (0.5 * w / len);
+        let m = &mut self.mesh;
+        let i = m.vertices.len() as u32;
+        for p in [a + n, b + n, b - n, a - n] {
+            m.colored_vertex(p, colour);
+        }
+        m.add_triangle(i, i + 1, i + 2);
+        m.add_triangle(i, i + 2, i + 3);
+    }
+
+    /// A square dot of half-size `r` at `p`.
+    pub fn dot(&mut self, p: Pos2, r: f32, colour: Color32) {
+        let m = &mut self.mesh;
+        let i = m.vertices.len() as u32;
+        for (dx, dy) in [(-r, -r), (r, -r), (r, r), (-r, r)] {
+            m.colored_vertex(p + Vec2::new(dx, dy), colour);
+        }
+        m.add_triangle(i, i + 1, i + 2);
+        m.add_triangle(i, i + 2, i + 3);
+    }
+
+    /// An arrow from `from` along `v`.
+    pub fn arrow(&mut self, from: Pos2, v: Vec2, w: f32, colour: Color32) {
+        let tip = from + v;
+        self.line(from, tip, w, colour);
+        let back = -v.normalized() * (v.length() * 0.3).clamp(2.0, 6.0);
+        let side = Vec2::new(-back.y, back.x) * 0.6;
+        self.line(tip, tip + back + side, w, colour);
+        self.line(tip, tip + back - side, w, colour);
+    }
+
+    /// A ring (polygon of 16 sides) of radius `r`.
+    pub fn ring(&mut self, c: Pos2, r: f32, w: f32, colour: Color32) {
+        let at = |k: usize| {
+            let a = std::f32::consts::TAU * k as f32 / 16.0;
+            c + Vec2::new(a.cos(), a.sin()) * r
+        };
+        for k in 0..16 {
+            self.line(at(k), at(k + 1), w, colour);
+        }
+    }
+}
+
+/// Keeps one point per `cell`-pixel square of the screen (decimates dense point sets to what
+/// the screen can show).
+fn decimate(points: impl Iterator<Item = Pos2>, cell: f32) -> Vec<Pos2> {
+    let mut seen = std::collections::HashSet::new();
+    points
+        .filter(|p| seen.insert(((p.x / cell) as i32, (p.y / cell) as i32)))
+        .collect()
+}
+
+/// The vector layers over the map drawn in `rect`, as one mesh: glyphs on a grid of screen
+/// spacing (so their number depends on the window, not on the planet), front points
+/// decimated to one per 3 pixels. `px` scales spacing, widths and sizes (1 on the screen).
+pub fn vector_mesh(rect: Rect, s: &Snapshot, layers: VectorLayers, px: f32) -> egui::Mesh {
+    let mut b = GlyphBatch::default();
     let lk = &s.lookup;
-    let spacing = 28.0f32;
+    let spacing = 28.0 * px;
     let cols = (rect.width() / spacing).max(1.0) as usize;
     let rows = (rect.height() / spacing).max(1.0) as usize;
     let glyph = |c: usize, r: usize| -> (Pos2, usize, DVec3) {
@@ -312,12 +382,13 @@ pub fn paint_vectors(painter: &egui::Painter, rect: Rect, s: &Snapshot, layers: 
                     continue;
                 }
                 let half = sd.normalized() * (spacing * 0.35);
-                painter.line_segment([pos - half, pos + half], Stroke::new(1.5, colour));
+                b.line(pos - half, pos + half, 1.5 * px, colour);
             }
         }
     }
     if layers.velocity {
         let scale = spacing * 0.8 / 100.0; // 100 mm/yr = 0.8 glyph spacing
+        let black = Color32::from_rgb(15, 15, 15);
         for r in 0..rows {
             for col in 0..cols {
                 let (pos, d, p) = glyph(col, r);
@@ -325,20 +396,23 @@ pub fn paint_vectors(painter: &egui::Painter, rect: Rect, s: &Snapshot, layers: 
                     continue;
                 };
                 let v = plate.pole_unit.cross(p) * (plate.angular_speed_rad_per_my * s.radius_km);
-                let sd = screen_dir(p, v) * scale as f32;
-                if sd.length() < 1.0 {
-                    painter.circle_filled(pos, 1.5, Color32::BLACK);
-                    continue;
+                let sd = screen_dir(p, v) * scale;
+                if sd.length() < px {
+                    b.dot(pos, 1.2 * px, black);
+                } else {
+                    b.arrow(pos, sd, 1.3 * px, black);
                 }
-                painter.arrow(pos, sd, Stroke::new(1.3, Color32::from_rgb(15, 15, 15)));
             }
         }
     }
     if layers.fronts {
-        for f in &s.fronts {
-            for p in &f.points_world {
-                painter.circle_filled(to_screen(rect, *p), 1.8, Color32::from_rgb(255, 40, 40));
-            }
+        let red = Color32::from_rgb(255, 40, 40);
+        let points = s
+            .fronts
+            .iter()
+            .flat_map(|f| f.points_world.iter().map(|p| to_screen(rect, *p)));
+        for p in decimate(points, 3.0 * px) {
+            b.dot(p, 1.5 * px, red);
         }
     }
     if layers.terranes {
@@ -346,12 +420,54 @@ pub fn paint_vectors(painter: &egui::Painter, rect: Rect, s: &Snapshot, layers: 
         for t in &s.terranes {
             let r = (rect.width() as f64 * 0.25 * (t.area_km2 / total).sqrt()).max(2.0) as f32;
             let [cr, cg, cb] = plate_colour(t.plate);
-            painter.circle_stroke(
-                to_screen(rect, t.centroid_world),
-                r,
-                Stroke::new(2.0, Color32::from_rgb(cr, cg, cb)),
-            );
-            painter.circle_filled(to_screen(rect, t.centroid_world), 2.0, Color32::BLACK);
+            let at = to_screen(rect, t.centroid_world);
+            b.ring(at, r, 2.0 * px, Color32::from_rgb(cr, cg, cb));
+            b.dot(at, 1.5 * px, Color32::BLACK);
+        }
+    }
+    b.mesh
+}
+
+/// Paints the vector layers over the map drawn in `rect` (one mesh).
+pub fn paint_vectors(painter: &egui::Painter, rect: Rect, s: &Snapshot, layers: VectorLayers) {
+    if layers == VectorLayers::default() {
+        return;
+    }
+    let mesh = vector_mesh(rect, s, layers, 1.0);
+    if !mesh.is_empty() {
+        painter.add(egui::Shape::mesh(mesh));
+    }
+}
+
+/// Fills the triangles of `mesh` (positions in pixels, vertex colours, opaque) into an image
+/// of `width × height` pixels: a pixel is covered when its centre is inside a triangle.
+pub fn rasterize_mesh(mesh: &egui::Mesh, width: usize, height: usize, pixels: &mut [Color32]) {
+    if pixels.len() != width * height {
+        return;
+    }
+    for t in mesh.indices.chunks_exact(3) {
+        let v = |i: u32| mesh.vertices.get(i as usize);
+        let (Some(a), Some(b), Some(c)) = (v(t[0]), v(t[1]), v(t[2])) else {
+            continue;
+        };
+        let (a, b, colour, c) = (a.pos, b.pos, a.color, c.pos);
+        let area = (b - a).x * (c - a).y - (b - a).y * (c - a).x;
+        if area.abs() < 1e-9 {
+            continue;
+        }
+        let x0 = a.x.min(b.x).min(c.x).floor().max(0.0) as usize;
+        let y0 = a.y.min(b.y).min(c.y).floor().max(0.0) as usize;
+        let x1 = (a.x.max(b.x).max(c.x).ceil().max(0.0) as usize).min(width);
+        let y1 = (a.y.max(b.y).max(c.y).ceil().max(0.0) as usize).min(height);
+        let edge =
+            |p: Pos2, q: Pos2, r: Pos2| ((q - p).x * (r - p).y - (q - p).y * (r - p).x) / area;
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let p = Pos2::new(x as f32 + 0.5, y as f32 + 0.5);
+                if edge(a, b, p) >= 0.0 && edge(b, c, p) >= 0.0 && edge(c, a, p) >= 0.0 {
+                    pixels[y * width + x] = colour;
+                }
+            }
         }
     }
 }

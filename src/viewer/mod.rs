@@ -14,8 +14,8 @@ mod tests;
 
 use std::path::PathBuf;
 
-pub use app::{ExitPlan, ViewerApp};
-pub use worker::{Request, SimFactory, SimHandle, Snapshot};
+pub use app::{ExitPlan, Percentiles, ViewerApp};
+pub use worker::{PluginsFn, Request, SimFactory, SimHandle, Snapshot, builtin_plugins};
 
 use crate::Simulation;
 
@@ -54,6 +54,9 @@ pub struct ViewerOptions {
     pub globe: bool,
     /// Steps per second while running (0: as fast as possible).
     pub steps_per_second: f64,
+    /// Measure frame times: run the simulation, exit after this many frames drawn while it
+    /// steps, and report the median frame time ([`ViewerReport`]).
+    pub fps_report: Option<u64>,
     /// The map's base layer at start.
     pub base: map::BaseLayer,
     /// Vector layers drawn at start.
@@ -68,6 +71,7 @@ impl Default for ViewerOptions {
             screenshot: None,
             globe: false,
             steps_per_second: 0.0,
+            fps_report: None,
             base: map::BaseLayer::Elevation,
             layers: map::VectorLayers::default(),
         }
@@ -85,6 +89,14 @@ pub struct ViewerReport {
     pub steps: u64,
     /// Samples of the planet shown last.
     pub samples: usize,
+    /// Time between frames while running, ms.
+    pub frame_ms: Option<Percentiles>,
+    /// Time in the app's UI code per frame while running, ms.
+    pub ui_ms: Option<Percentiles>,
+    /// eframe's CPU time per frame (UI, tessellation, rendering, present) while running, ms.
+    pub cpu_ms: Option<Percentiles>,
+    /// Snapshots shown while running (each is a new picture of the planet).
+    pub snapshots: u64,
 }
 
 /// Opens the viewer on the planet `build` makes (on the simulation thread: a bevy app cannot
@@ -94,13 +106,35 @@ pub fn run(
     build: impl FnOnce() -> Result<Simulation, String> + Send + 'static,
     opts: ViewerOptions,
 ) -> Result<ViewerReport, ViewerError> {
+    run_with_plugins(build, builtin_plugins(), opts)
+}
+
+/// As [`run`], for a planet built with other plugins than the built-in ones (third-party
+/// plugins): `plugins` makes the group `build` uses, and "New planet" and "Load" in the viewer
+/// rebuild with it.
+pub fn run_with_plugins(
+    build: impl FnOnce() -> Result<Simulation, String> + Send + 'static,
+    plugins: PluginsFn,
+    opts: ViewerOptions,
+) -> Result<ViewerReport, ViewerError> {
     let has_display = ["DISPLAY", "WAYLAND_DISPLAY"]
         .iter()
         .any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()));
     if !has_display {
         return Err(ViewerError::NoDisplay);
     }
-    let handle = SimHandle::spawn(build);
+    // The simulation's threads yield to the window's: a frame is drawn (on lavapipe, by the
+    // CPU) before the next step's work. The global pool exists already when `--threads` was
+    // given; then it keeps its priority.
+    let _ = rayon::ThreadPoolBuilder::new()
+        .thread_name(|i| format!("planet-rayon-{i}"))
+        .start_handler(|_| worker::lower_thread_priority())
+        .build_global();
+    let handle = SimHandle::spawn_with_plugins(plugins, move || {
+        // The factory runs on the simulation thread.
+        worker::lower_thread_priority();
+        build()
+    });
     handle
         .wait_ready(BUILD_TIMEOUT)
         .map_err(ViewerError::Planet)?;
@@ -113,6 +147,9 @@ pub fn run(
             .with_inner_size(opts.window_size),
         renderer: eframe::Renderer::Wgpu,
         wgpu_options,
+        // Dithering adds work to every fragment of every frame; on a software rasteriser
+        // (lavapipe) that is a large share of the frame (set PLANET_VIEW_DITHER=1 for it).
+        dithering: std::env::var_os("PLANET_VIEW_DITHER").is_some_and(|v| v == "1"),
         ..Default::default()
     };
     let report = std::sync::Arc::new(std::sync::Mutex::new(ViewerReport::default()));
@@ -138,7 +175,12 @@ pub fn run(
                 app.steps_per_second = opts.steps_per_second;
                 app.sim.send(Request::SetSpeed(opts.steps_per_second));
             }
-            if let Some(n) = opts.exit_after_steps {
+            if let Some(n) = opts.fps_report {
+                app.frames.record_frame_times = true;
+                let mut plan = ExitPlan::new(0, None);
+                plan.after_running_frames = Some(n);
+                app = app.with_exit_plan(plan);
+            } else if let Some(n) = opts.exit_after_steps {
                 app = app.with_exit_plan(ExitPlan::new(n, opts.screenshot.clone()));
             }
             Ok(Box::new(ReportingApp {
@@ -162,6 +204,10 @@ struct ReportingApp {
 }
 
 impl eframe::App for ReportingApp {
+    fn clear_color(&self, visuals: &eframe::egui::Visuals) -> [f32; 4] {
+        eframe::App::clear_color(&self.app, visuals)
+    }
+
     fn ui(&mut self, ui: &mut eframe::egui::Ui, frame: &mut eframe::Frame) {
         eframe::App::ui(&mut self.app, ui, frame);
         if let Ok(mut r) = self.report.lock() {
@@ -169,6 +215,12 @@ impl eframe::App for ReportingApp {
             r.running_fps = self.app.frames.running_fps();
             r.steps = self.app.snap.as_ref().map_or(0, |s| s.steps_taken);
             r.samples = self.app.snap.as_ref().map_or(0, |s| s.samples);
+            if self.app.frames.record_frame_times {
+                r.frame_ms = Percentiles::of(&self.app.frames.running_intervals_ms);
+                r.ui_ms = Percentiles::of(&self.app.frames.running_ui_ms);
+                r.cpu_ms = Percentiles::of(&self.app.frames.running_cpu_ms);
+            }
+            r.snapshots = self.app.frames.running_snapshots;
         }
     }
 }

@@ -32,6 +32,22 @@ impl Plugin for CounterPlugin {
     }
 }
 
+fn temp_dir(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("planet-viewer-unit-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Distinct colours in a PNG file, and its size.
+fn png_colours(path: &std::path::Path) -> (u32, u32, usize) {
+    let img = image::open(path)
+        .unwrap_or_else(|e| panic!("{} is not a readable image: {e}", path.display()))
+        .to_rgba8();
+    let colours: std::collections::HashSet<[u8; 4]> = img.pixels().map(|p| p.0).collect();
+    (img.width(), img.height(), colours.len())
+}
+
 fn small_params() -> Params {
     let mut p = Params::default();
     p.planet.samples = 4000;
@@ -70,7 +86,7 @@ impl Harness {
         h
     }
 
-    fn frame(&mut self, events: Vec<egui::Event>) {
+    fn frame(&mut self, events: Vec<egui::Event>) -> egui::FullOutput {
         let raw = egui::RawInput {
             screen_rect: Some(egui::Rect::from_min_size(
                 egui::Pos2::ZERO,
@@ -82,7 +98,7 @@ impl Harness {
         };
         self.time += 1.0 / 60.0;
         let app = &mut self.app;
-        let _ = self.ctx.run_ui(raw, |ui| app.root_ui(ui));
+        self.ctx.run_ui(raw, |ui| app.root_ui(ui))
     }
 
     fn click_at(&mut self, pos: egui::Pos2) {
@@ -98,6 +114,24 @@ impl Harness {
         self.frame(vec![egui::Event::PointerGone]);
     }
 
+    /// Presses at `from`, moves to `to` in a few frames, releases there.
+    fn drag(&mut self, from: egui::Pos2, to: egui::Pos2) {
+        let button = |pos, pressed| egui::Event::PointerButton {
+            pos,
+            button: egui::PointerButton::Primary,
+            pressed,
+            modifiers: Default::default(),
+        };
+        self.frame(vec![egui::Event::PointerMoved(from)]);
+        self.frame(vec![button(from, true)]);
+        for k in 1..=6 {
+            let p = from + (to - from) * (k as f32 / 6.0);
+            self.frame(vec![egui::Event::PointerMoved(p)]);
+        }
+        self.frame(vec![button(to, false)]);
+        self.frame(vec![egui::Event::PointerGone]);
+    }
+
     fn rect(&self, key: &str) -> egui::Rect {
         *self.app.rects.get(key).unwrap_or_else(|| {
             panic!("no widget \"{key}\" was drawn; drawn: {:?}", {
@@ -110,6 +144,10 @@ impl Harness {
 
     fn click(&mut self, key: &str) {
         let c = self.rect(key).center();
+        assert!(
+            c.x > 0.0 && c.y > 0.0 && c.x < 1280.0 && c.y < 800.0,
+            "\"{key}\" is off the screen, at {c:?}"
+        );
         self.click_at(c);
     }
 
@@ -410,4 +448,477 @@ fn run_until_stops_at_the_target_time() {
         std::thread::sleep(Duration::from_millis(20));
     }
     h.finish();
+}
+
+#[test]
+fn save_then_load_from_the_viewer_restores_the_same_state() {
+    let dir = temp_dir("save");
+    let file = dir.join("viewer-test.planet");
+    let mut h = Harness::new(plain);
+    h.step(2);
+    h.app.file_path = file.display().to_string();
+    h.frame(Vec::new());
+    h.click("save");
+    h.settle();
+    assert!(file.is_file(), "no save at {}", file.display());
+    let saved = h.inspect(|sim| sim.state_hash());
+    h.step(2);
+    let moved_on = h.inspect(|sim| sim.state_hash());
+    assert_ne!(moved_on, saved, "two more steps changed the planet");
+    h.click("load");
+    h.settle();
+    let (loaded, step) = h.inspect(|sim| (sim.state_hash(), sim.clock().step));
+    let snap = h.app.snap.clone().unwrap();
+    h.finish();
+    assert_eq!(
+        loaded, saved,
+        "the loaded planet is the saved one, bit for bit"
+    );
+    assert_eq!(step, 2);
+    assert_eq!(snap.step, 2, "the view shows the loaded planet");
+    assert!(
+        snap.log.iter().any(|l| l.starts_with("loaded")),
+        "{:?}",
+        snap.log
+    );
+}
+
+#[test]
+fn load_of_a_missing_file_says_so_and_keeps_the_planet() {
+    let mut h = Harness::new(plain);
+    h.step(1);
+    let before = h.inspect(|sim| sim.state_hash());
+    h.app.file_path = "/nonexistent/dir/none.planet".into();
+    h.frame(Vec::new());
+    h.click("load");
+    h.settle();
+    let after = h.inspect(|sim| sim.state_hash());
+    let snap = h.app.snap.clone().unwrap();
+    h.finish();
+    assert_eq!(after, before);
+    let last = snap.log.last().cloned().unwrap_or_default();
+    assert!(
+        last.contains("load failed") && last.contains("none.planet"),
+        "{last}"
+    );
+}
+
+#[test]
+fn export_maps_writes_pngs_of_the_planet() {
+    let dir = temp_dir("maps");
+    let mut h = Harness::new(plain);
+    h.step(1);
+    h.app.export_dir = dir.display().to_string();
+    h.frame(Vec::new());
+    h.click("export_maps");
+    h.settle();
+    h.finish();
+    // At least as many colours as the map has kinds of things (crust type: ocean, land and
+    // coast; plates: one each).
+    for (name, least) in [
+        ("elevation.png", 16),
+        ("plates.png", 8),
+        ("crust_age.png", 8),
+        ("crust_type.png", 2),
+    ] {
+        let path = dir.join(name);
+        assert!(path.is_file(), "{name} was not written");
+        let (w, hgt, colours) = png_colours(&path);
+        assert_eq!(
+            (w, hgt),
+            (
+                super::app::EXPORT_MAP_WIDTH,
+                super::app::EXPORT_MAP_WIDTH / 2
+            )
+        );
+        assert!(
+            colours >= least,
+            "{name} is (nearly) blank: {colours} colours"
+        );
+    }
+}
+
+#[test]
+fn export_view_writes_the_window_image() {
+    let dir = temp_dir("view");
+    let mut h = Harness::new(plain);
+    h.app.export_dir = dir.display().to_string();
+    h.frame(Vec::new());
+    // The press and release of the button, then the frame that follows: the release frame asks
+    // the window for a screenshot.
+    let c = h.rect("export_view").center();
+    let button = |pressed| egui::Event::PointerButton {
+        pos: c,
+        button: egui::PointerButton::Primary,
+        pressed,
+        modifiers: Default::default(),
+    };
+    let mut outputs = vec![
+        h.frame(vec![egui::Event::PointerMoved(c)]),
+        h.frame(vec![button(true)]),
+        h.frame(vec![button(false)]),
+    ];
+    outputs.push(h.frame(vec![egui::Event::PointerGone]));
+    // Here the window would render and read back its pixels; stand in with the map the view
+    // shows (1280x800, the map scaled into it).
+    let map = h.app.map_image.clone().expect("a map is drawn");
+    let [mw, mh] = map.size;
+    let (w, hgt) = (1280usize, 800usize);
+    let pixels = (0..w * hgt)
+        .map(|i| map.pixels[((i / w) * mh / hgt) * mw + (i % w) * mw / w])
+        .collect();
+    let shot = std::sync::Arc::new(egui::ColorImage::new([w, hgt], pixels));
+    let mut asked = 0;
+    for out in outputs {
+        for (_, vp) in out.viewport_output {
+            for cmd in vp.commands {
+                if let egui::ViewportCommand::Screenshot(cb) = cmd {
+                    asked += 1;
+                    cb.complete(shot.clone());
+                }
+            }
+        }
+    }
+    h.finish();
+    assert_eq!(asked, 1, "the button asks for one screenshot");
+    let path = dir.join("view.png");
+    assert!(path.is_file(), "view.png was not written");
+    let (pw, ph, colours) = png_colours(&path);
+    assert_eq!((pw, ph), (1280, 800));
+    assert!(
+        colours >= 4,
+        "view.png is (nearly) blank: {colours} colours"
+    );
+}
+
+#[test]
+fn dragging_the_pole_on_the_globe_sets_the_plates_motion_through_a_command() {
+    let mut h = Harness::new(plain);
+    h.click("view:globe");
+    assert!(h.app.view3d);
+    let snap = h.app.snap.clone().unwrap();
+    let plate = snap
+        .plates
+        .iter()
+        .max_by(|a, b| a.area_km2.total_cmp(&b.area_km2))
+        .unwrap()
+        .clone();
+    // Select it and take the "pick pole" tool.
+    h.app.selected = Some(plate.id);
+    h.app.edit = None;
+    h.frame(Vec::new());
+    h.app.tool = Tool::PickPole;
+    h.frame(Vec::new());
+    let globe = h.rect("globe");
+    let (from, to) = (
+        globe.center() + egui::vec2(-30.0, 20.0),
+        globe.center() + egui::vec2(40.0, -35.0),
+    );
+    h.drag(from, to);
+    h.settle();
+    // Where the pole was dropped: the point of the globe under the release position.
+    let aspect = globe.width() / globe.height();
+    let ndc = [
+        (to.x - globe.left()) / globe.width() * 2.0 - 1.0,
+        1.0 - (to.y - globe.top()) / globe.height() * 2.0,
+    ];
+    let hit = h
+        .app
+        .camera
+        .pick(aspect, ndc)
+        .expect("the drop is on the globe");
+    let dropped = glam::DVec3::new(hit.x as f64, hit.y as f64, hit.z as f64).normalize();
+    assert_eq!(h.app.tool, Tool::Select, "the drop ends the pick");
+    let id = plate.id;
+    let (pole, history) = h.inspect(move |sim| {
+        let world = sim.world_mut();
+        let pole = world
+            .query::<(&Plate, &PlateMotion)>()
+            .iter(world)
+            .find(|(p, _)| p.id.0 == id)
+            .map(|(_, m)| m.euler_pole);
+        let history = sim
+            .world()
+            .resource::<crate::io::save::CommandHistory>()
+            .entries
+            .clone();
+        (pole, history)
+    });
+    h.finish();
+    let pole = pole.expect("the plate entity exists").normalize();
+    assert!(
+        pole.dot(dropped) > 0.99999,
+        "the plate's pole {pole:?} is where it was dropped {dropped:?}"
+    );
+    let line = history
+        .iter()
+        .map(|(_, l)| l)
+        .find(|l| l.contains("set_motion"))
+        .unwrap_or_else(|| panic!("no set_motion in the history: {history:?}"));
+    assert!(line.contains(&format!("\"plate\":{id}")), "{line}");
+}
+
+#[test]
+fn an_out_of_range_parameter_typed_in_the_panel_is_refused_with_a_message() {
+    let mut h = Harness::new(plain);
+    h.click("params:header");
+    h.frame(Vec::new());
+    let before = h.inspect(|sim| sim.params().continent.erosion_mm_per_yr);
+    let spec = *Params::schema()
+        .iter()
+        .find(|s| s.key == "continent.erosion_mm_per_yr")
+        .unwrap();
+    let too_big = spec.max * 10.0 + 1.0;
+    h.app
+        .param_text
+        .insert(spec.key.into(), format!("{too_big}"));
+    let sent = h.app.sim.last_sent();
+    h.click("params:apply");
+    h.settle();
+    let message = h
+        .app
+        .param_errors
+        .get(spec.key)
+        .cloned()
+        .unwrap_or_else(|| panic!("no message for the key: {:?}", h.app.param_errors));
+    assert!(message.contains(spec.key), "{message}");
+    assert_eq!(h.app.sim.last_sent(), sent, "nothing was sent");
+    let (after, history) = h.inspect(|sim| {
+        (
+            sim.params().continent.erosion_mm_per_yr,
+            sim.world()
+                .resource::<crate::io::save::CommandHistory>()
+                .entries
+                .len(),
+        )
+    });
+    h.finish();
+    assert_eq!(after, before, "the planet kept its value");
+    assert_eq!(history, 0, "nothing was recorded");
+}
+
+#[test]
+fn a_planet_parameter_is_refused_for_the_running_planet() {
+    let mut h = Harness::new(plain);
+    let snap = h.app.snap.clone().unwrap();
+    h.app.param_text.insert("init.plates".into(), "9".into());
+    let sent = h.app.sim.last_sent();
+    assert!(!h.app.apply_params(&snap, false));
+    assert_eq!(h.app.sim.last_sent(), sent);
+    assert!(
+        h.app.param_errors["init.plates"].contains("new planet"),
+        "{:?}",
+        h.app.param_errors
+    );
+    // As a new planet it is taken.
+    assert!(h.app.apply_params(&snap, true), "{:?}", h.app.param_errors);
+    h.settle();
+    let plates = h.inspect(|sim| sim.params().init.plates);
+    h.finish();
+    assert_eq!(plates, 9);
+}
+
+#[test]
+fn a_parameter_change_from_the_panel_is_recorded_and_replays() {
+    use crate::commands::{commands_in_history, replay};
+    let mut h = Harness::new(plain);
+    h.step(1);
+    h.click("params:header");
+    h.frame(Vec::new());
+    h.app
+        .param_text
+        .insert("continent.erosion_mm_per_yr".into(), "0.75".into());
+    h.click("params:apply");
+    h.settle();
+    assert!(h.app.param_errors.is_empty(), "{:?}", h.app.param_errors);
+    h.step(2);
+    let (live, history, value) = h.inspect(|sim| {
+        (
+            sim.state_hash(),
+            sim.world()
+                .resource::<crate::io::save::CommandHistory>()
+                .clone(),
+            sim.params().continent.erosion_mm_per_yr,
+        )
+    });
+    h.finish();
+    assert_eq!(value, 0.75);
+    let commands = commands_in_history(&history).expect("the history parses");
+    assert_eq!(commands.len(), 1, "one change: {commands:?}");
+    assert_eq!(commands[0].0, 1, "applied after the first step");
+    assert!(
+        matches!(&commands[0].1, crate::commands::Command::SetParam { key, .. } if key == "continent.erosion_mm_per_yr"),
+        "{commands:?}"
+    );
+    let mut again = replay(small_params(), &commands, 3).expect("the run replays");
+    assert_eq!(again.state_hash(), live, "the replay is the same planet");
+    // Without the change the planet differs, so the replay did depend on it.
+    let mut without = replay(small_params(), &[], 3).unwrap();
+    assert_ne!(without.state_hash(), live);
+}
+
+#[test]
+fn set_param_commands_are_checked_like_parameter_files() {
+    use crate::commands::{Command, SettingValue};
+    let mut sim = Simulation::new(small_params()).unwrap();
+    let set = |key: &str, value| Command::SetParam {
+        key: key.into(),
+        value,
+    };
+    for (cmd, why) in [
+        (set("planet.samples", SettingValue::Int(5000)), "built"),
+        (
+            set("continent.erosion_mm_per_yr", SettingValue::Float(-1.0)),
+            "erosion",
+        ),
+        (set("no.such_key", SettingValue::Float(1.0)), "no.such_key"),
+        (
+            set("continent.erosion_mm_per_yr", SettingValue::Bool(true)),
+            "erosion",
+        ),
+    ] {
+        let e = sim.apply(&cmd).expect_err(&format!("{cmd:?} is refused"));
+        assert!(e.to_string().contains(why), "{cmd:?}: {e}");
+    }
+    assert!(
+        sim.world()
+            .resource::<crate::io::save::CommandHistory>()
+            .entries
+            .is_empty()
+    );
+    // JSON round trip of what the history records.
+    let ok = set("continent.erosion_mm_per_yr", SettingValue::Int(1));
+    sim.apply(&ok).unwrap();
+    assert_eq!(sim.params().continent.erosion_mm_per_yr, 1.0);
+    let back: Command = serde_json::from_str(&ok.to_json()).unwrap();
+    assert_eq!(back, ok);
+}
+
+fn counter_plugins() -> bevy_app::PluginGroupBuilder {
+    TectonicPlugins.build().add(CounterPlugin)
+}
+
+#[test]
+fn new_and_loaded_planets_keep_the_viewers_plugins() {
+    let dir = temp_dir("plugins");
+    let file = dir.join("with-counter.planet");
+    let handle = SimHandle::spawn_with_plugins(std::sync::Arc::new(counter_plugins), || {
+        Simulation::with_plugins(small_params(), counter_plugins()).map_err(|e| e.to_string())
+    });
+    handle.wait_ready(WAIT).unwrap();
+    let mut h = Harness {
+        ctx: egui::Context::default(),
+        app: ViewerApp::new(handle),
+        time: 0.0,
+    };
+    h.frame(Vec::new());
+    let has_counter = |h: &Harness| {
+        h.app
+            .snap
+            .as_ref()
+            .unwrap()
+            .phenomena
+            .iter()
+            .any(|p| p.name == "counter")
+    };
+    assert!(has_counter(&h));
+    // New planet from the parameters panel.
+    let snap = h.app.snap.clone().unwrap();
+    h.app.param_text.insert("planet.seed".into(), "77".into());
+    assert!(h.app.apply_params(&snap, true), "{:?}", h.app.param_errors);
+    h.settle();
+    assert_eq!(h.app.snap.as_ref().unwrap().params.planet.seed, 77);
+    assert!(has_counter(&h), "the new planet has the third-party plugin");
+    h.step(1);
+    assert_eq!(h.inspect(|sim| sim.world().resource::<Runs>().0), 1);
+    // Save and load it back.
+    h.app.file_path = file.display().to_string();
+    h.frame(Vec::new());
+    h.click("save");
+    h.settle();
+    h.click("load");
+    h.settle();
+    let snap = h.app.snap.clone().unwrap();
+    assert!(
+        snap.log.iter().any(|l| l.starts_with("loaded")),
+        "{:?}",
+        snap.log
+    );
+    assert!(
+        has_counter(&h),
+        "the loaded planet has the third-party plugin"
+    );
+    h.step(1);
+    let runs = h.inspect(|sim| sim.world().get_resource::<Runs>().map(|r| r.0));
+    h.finish();
+    assert!(
+        runs.is_some(),
+        "the plugin's resource exists after the load"
+    );
+}
+
+#[test]
+fn a_triangle_rasterized_into_the_map_covers_the_pixels_inside_it() {
+    let (w, h) = (16usize, 16usize);
+    let mut pixels = vec![egui::Color32::WHITE; w * h];
+    let mut mesh = egui::Mesh::default();
+    let red = egui::Color32::RED;
+    // Inside the image, away from its borders; wound clockwise on the screen (y down): the
+    // fill must not depend on the winding.
+    // No edge along an axis, so that every edge decides some pixels of the bounding box.
+    let corners = [(1.0f32, 7.0f32), (14.0, 1.0), (9.0, 14.0)];
+    for (x, y) in corners {
+        mesh.colored_vertex(egui::pos2(x, y), red);
+    }
+    mesh.add_triangle(0, 2, 1);
+    map::rasterize_mesh(&mesh, w, h, &mut pixels);
+    // Left of each directed edge (clockwise corners, y down): the inside.
+    let side = |(ax, ay): (f32, f32), (bx, by): (f32, f32), (px, py): (f32, f32)| {
+        (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+    };
+    let mut filled = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let c = (x as f32 + 0.5, y as f32 + 0.5);
+            let inside = (0..3).all(|k| side(corners[k], corners[(k + 1) % 3], c) >= 0.0);
+            assert_eq!(pixels[y * w + x] == red, inside, "pixel ({x}, {y})");
+            filled += usize::from(inside);
+        }
+    }
+    assert!(filled > 40, "{filled}");
+}
+
+#[test]
+fn velocity_arrows_drawn_into_the_map_texture_change_it_in_their_colour_only() {
+    let h = Harness::new(plain);
+    let snap = h.app.snap.clone().unwrap();
+    h.finish();
+    let base = map::render_base(&snap, BaseLayer::Plates);
+    let [w, hgt] = base.size;
+    let rect = egui::Rect::from_min_size(egui::Pos2::ZERO, egui::vec2(w as f32, hgt as f32));
+    let layers = map::VectorLayers {
+        velocity: true,
+        ..Default::default()
+    };
+    let mesh = map::vector_mesh(rect, &snap, layers, w as f32 / 690.0);
+    assert!(!mesh.is_empty());
+    let mut with = base.pixels.clone();
+    map::rasterize_mesh(&mesh, w, hgt, &mut with);
+    let changed: Vec<_> = with
+        .iter()
+        .zip(&base.pixels)
+        .filter(|(a, b)| a != b)
+        .map(|(a, _)| *a)
+        .collect();
+    assert!(
+        changed.len() > 1000,
+        "only {} pixels show arrows",
+        changed.len()
+    );
+    assert!(
+        changed
+            .iter()
+            .all(|c| *c == egui::Color32::from_rgb(15, 15, 15)),
+        "arrows are drawn in their colour"
+    );
 }

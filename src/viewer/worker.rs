@@ -32,11 +32,44 @@ pub const MAP_HEIGHT: u32 = MAP_WIDTH / 2;
 /// Least time between two snapshots while running (a snapshot resamples the crust).
 const SNAPSHOT_INTERVAL: Duration = Duration::from_millis(120);
 
+/// How many `nice` levels the viewer's simulation threads drop (5: about a quarter of the CPU
+/// when the window wants all of it, which keeps a big planet stepping).
+const PRIORITY_DROP: i32 = 5;
+
+/// Lowers the calling thread's scheduling priority (by [`PRIORITY_DROP`] `nice` levels; on
+/// Linux a thread's own). The viewer's simulation threads call it, so that drawing frames
+/// comes first.
+pub fn lower_thread_priority() {
+    #[cfg(target_os = "linux")]
+    {
+        unsafe extern "C" {
+            fn nice(inc: std::ffi::c_int) -> std::ffi::c_int;
+        }
+        // SAFETY: nice(2) takes an integer and only changes the scheduling priority of the
+        // calling thread (Linux threads are scheduled on their own); it has no other effect.
+        let _ = unsafe { nice(PRIORITY_DROP) };
+    }
+}
+
 /// A function run on the simulation thread with the simulation (see [`SimHandle::with_sim`]).
 pub type SimFn = Box<dyn FnOnce(&mut Simulation) + Send>;
 
 /// Builds the simulation on its thread (a bevy app is not `Send`, so it is made where it runs).
 pub type SimFactory = Box<dyn FnOnce() -> Result<Simulation, String> + Send>;
+
+/// Where the UI leaves the function that asks it for a new frame (see
+/// [`SimHandle::set_repaint`]).
+type RepaintSlot = Arc<Mutex<Option<Box<dyn Fn() + Send>>>>;
+
+/// Makes the plugin group the viewer's planets are built with: "New planet" and "Load" rebuild
+/// with it, so third-party plugins the viewer was started with stay.
+pub type PluginsFn = Arc<dyn Fn() -> bevy_app::PluginGroupBuilder + Send + Sync>;
+
+/// The built-in plugins ([`crate::plugins::TectonicPlugins`]).
+pub fn builtin_plugins() -> PluginsFn {
+    use bevy_app::PluginGroup;
+    Arc::new(|| crate::plugins::TectonicPlugins.build())
+}
 
 /// What the UI asks of the simulation thread.
 pub enum Request {
@@ -59,11 +92,11 @@ pub enum Request {
     SetParams(Box<Params>),
     /// Set one plugin parameter.
     SetPluginParam(String, ParamValue),
-    /// Build a new planet from these parameters (built-in plugins).
+    /// Build a new planet from these parameters (with the viewer's plugins).
     NewPlanet(Box<Params>),
     /// Save the planet to this file.
     Save(PathBuf),
-    /// Load a planet from this file (built-in plugins).
+    /// Load a planet from this file (with the viewer's plugins).
     Load(PathBuf),
     /// Write the maps (PNG) into this folder, at this width.
     ExportMaps(PathBuf, u32),
@@ -252,21 +285,30 @@ pub struct SimHandle {
     shared: Arc<(Mutex<Shared>, Condvar)>,
     next_seq: u64,
     thread: Option<JoinHandle<()>>,
-    repaint: Arc<Mutex<Option<Box<dyn Fn() + Send>>>>,
+    repaint: RepaintSlot,
 }
 
 impl SimHandle {
     /// Starts the thread; it builds the simulation with `factory` and publishes a first
-    /// snapshot (see [`Self::wait_ready`]).
+    /// snapshot (see [`Self::wait_ready`]). New and loaded planets get the built-in plugins.
     pub fn spawn(factory: impl FnOnce() -> Result<Simulation, String> + Send + 'static) -> Self {
+        Self::spawn_with_plugins(builtin_plugins(), factory)
+    }
+
+    /// As [`Self::spawn`], with new and loaded planets built with `plugins` (give the group
+    /// `factory` builds its planet with).
+    pub fn spawn_with_plugins(
+        plugins: PluginsFn,
+        factory: impl FnOnce() -> Result<Simulation, String> + Send + 'static,
+    ) -> Self {
         let (tx, rx) = channel();
         let shared: Arc<(Mutex<Shared>, Condvar)> = Arc::default();
-        let repaint: Arc<Mutex<Option<Box<dyn Fn() + Send>>>> = Arc::default();
+        let repaint: RepaintSlot = Arc::default();
         let (shared2, repaint2) = (shared.clone(), repaint.clone());
         let thread = std::thread::Builder::new()
             .name("planet-sim".into())
             .spawn(move || match factory() {
-                Ok(sim) => Worker::new(sim, rx, shared2, repaint2).run(),
+                Ok(sim) => Worker::new(sim, plugins, rx, shared2, repaint2).run(),
                 Err(e) => {
                     let (lock, cvar) = &*shared2;
                     if let Ok(mut s) = lock.lock() {
@@ -385,9 +427,10 @@ impl Drop for SimHandle {
 
 struct Worker {
     sim: Simulation,
+    plugins: PluginsFn,
     rx: Receiver<(u64, Request)>,
     shared: Arc<(Mutex<Shared>, Condvar)>,
-    repaint: Arc<Mutex<Option<Box<dyn Fn() + Send>>>>,
+    repaint: RepaintSlot,
     running: bool,
     run_until_my: Option<f64>,
     steps_left: Option<u64>,
@@ -405,14 +448,16 @@ struct Worker {
 impl Worker {
     fn new(
         sim: Simulation,
+        plugins: PluginsFn,
         rx: Receiver<(u64, Request)>,
         shared: Arc<(Mutex<Shared>, Condvar)>,
-        repaint: Arc<Mutex<Option<Box<dyn Fn() + Send>>>>,
+        repaint: RepaintSlot,
     ) -> Self {
         let lookup = Arc::new(PixelLookup::build(sim.mesh(), MAP_WIDTH, MAP_HEIGHT));
         let positions = Arc::new(sim.mesh().positions.clone());
         Self {
             sim,
+            plugins,
             rx,
             shared,
             repaint,
@@ -587,7 +632,7 @@ impl Worker {
                 Ok(()) => self.say(format!("{key} = {v}")),
                 Err(e) => self.say(format!("plugin parameter refused: {e}")),
             },
-            Request::NewPlanet(p) => match Simulation::new(*p) {
+            Request::NewPlanet(p) => match Simulation::with_plugins(*p, (self.plugins)()) {
                 Ok(sim) => {
                     self.replace_sim(sim);
                     self.say(format!("new planet: {} samples", self.sim.mesh().len()));
@@ -612,7 +657,7 @@ impl Worker {
                     Err(e) => self.say(format!("save failed: {e}")),
                 }
             }
-            Request::Load(path) => match save::load_from_file(&path) {
+            Request::Load(path) => match save::load_from_file_with(&path, (self.plugins)()) {
                 Ok(sim) => {
                     self.replace_sim(sim);
                     self.say(format!("loaded {}", path.display()));
@@ -779,5 +824,6 @@ pub fn describe_outcome(o: &Outcome) -> String {
         Outcome::Rift { fragments } => format!("rift into plates {fragments:?}"),
         Outcome::Uplift { samples } => format!("{samples} samples raised or lowered"),
         Outcome::Phenomenon => "phenomenon switched".into(),
+        Outcome::Param { key } => format!("{key} set"),
     }
 }

@@ -173,6 +173,8 @@ impl Simulation {
     /// change.
     pub fn set_backend(&mut self, choice: crate::gpu::BackendChoice) -> Result<String, SimError> {
         let selected = crate::gpu::select_backend(choice)?;
+        // The old context may hold fields newer than the host: bring them over before it goes.
+        self.sync_crust()?;
         let world = self.app.world_mut();
         world.insert_resource(selected.backend);
         match selected.context {
@@ -195,12 +197,29 @@ impl Simulation {
             .unwrap_or_default()
     }
 
-    /// Runs `n` steps.
+    /// Runs `n` steps; on the GPU backend the host crust is then in sync with the device.
     pub fn run_steps(&mut self, n: u64) -> Result<(), SimError> {
         for _ in 0..n {
             self.step()?;
         }
+        self.sync_crust()
+    }
+
+    /// On the GPU backend, pulls every crust field the device holds newer than the host (lazy
+    /// host sync: kernels leave their results on the device until a CPU reader needs them), so
+    /// that [`Self::crust`] and [`Self::world`] show the current crust. Does nothing on the CPU
+    /// backend or when the host is already in sync. [`Self::run_steps`], [`Self::state_hash`],
+    /// [`Self::resampled_crust`], [`Self::world_mut`] and saves call it themselves; call it after
+    /// [`Self::step`] before reading the crust through `crust()` or `world()`.
+    pub fn sync_crust(&mut self) -> Result<(), SimError> {
+        crate::gpu::sync_crust_to_host(self.app.world_mut(), crate::gpu::FieldMask::ALL)?;
         Ok(())
+    }
+
+    /// [`Self::sync_crust`] for methods that cannot return an error: a failure is logged and
+    /// kept in the context, so the next step stops with it.
+    fn sync_crust_or_record(&mut self) {
+        crate::gpu::sync_crust_to_host_or_record(self.app.world_mut(), crate::gpu::FieldMask::ALL);
     }
 
     /// Number of steps that `my` million years take (rounded to the nearest step).
@@ -269,7 +288,9 @@ impl Simulation {
     pub fn mesh(&self) -> &SphereMesh {
         self.app.world().resource::<SphereMesh>()
     }
-    /// The crust (in plate frames since the last resampling).
+    /// The crust (in plate frames since the last resampling). On the GPU backend this is the
+    /// host copy as of the last sync: after [`Self::run_steps`] or [`Self::sync_crust`] it is
+    /// current, after a bare [`Self::step`] the fields the kernels wrote may be stale.
     pub fn crust(&self) -> &Crust {
         self.app.world().resource::<Crust>()
     }
@@ -289,16 +310,22 @@ impl Simulation {
     pub fn timings(&self) -> &StepTimings {
         self.app.world().resource::<StepTimings>()
     }
-    /// The ECS world (read).
+    /// The ECS world (read). On the GPU backend its crust is as of the last sync (see
+    /// [`Self::crust`]).
     pub fn world(&self) -> &World {
         self.app.world()
     }
-    /// The ECS world (write): spawn entities, change plate motions, edit the crust.
+    /// The ECS world (write): spawn entities, change plate motions, edit the crust. On the GPU
+    /// backend the host crust is first brought in sync with the device (a pull failure is kept
+    /// and stops the next step).
     pub fn world_mut(&mut self) -> &mut World {
+        self.sync_crust_or_record();
         self.app.world_mut()
     }
-    /// The app, for adding plugins after construction.
+    /// The app, for adding plugins after construction (the crust is synced as for
+    /// [`Self::world_mut`]).
     pub fn app_mut(&mut self) -> &mut App {
+        self.sync_crust_or_record();
         &mut self.app
     }
 
@@ -339,6 +366,7 @@ impl Simulation {
                 "plate {bad} is used by a sample but has no motion"
             )));
         }
+        self.sync_crust()?;
         let world = self.app.world_mut();
         Plate::despawn_all(world);
         world.resource_mut::<Crust>().plate = plate_of_sample;
@@ -382,6 +410,7 @@ impl Simulation {
     /// resampling it applies no pending suture and does not displace continental crust overridden
     /// by another continent; both only move a few samples near active collisions.)
     pub fn resampled_crust(&mut self) -> Crust {
+        self.sync_crust_or_record();
         let table = self.plate_table();
         let ocean_on = self
             .app
@@ -427,6 +456,7 @@ impl Simulation {
     /// A stable hash of the whole simulation state: crust, plates (ids, motions, frames) and
     /// clock. Equal hashes mean bit-identical planets.
     pub fn state_hash(&mut self) -> u64 {
+        self.sync_crust_or_record();
         let table = self.plate_table();
         let world = self.app.world();
         let mut h = StableHasher::default();

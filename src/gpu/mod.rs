@@ -37,7 +37,7 @@ pub mod subduction_uplift;
 
 use std::sync::{Arc, Mutex};
 
-use bevy_ecs::change_detection::Tick;
+use bevy_ecs::change_detection::{DetectChangesMut, Tick};
 use bevy_ecs::prelude::*;
 
 use crate::resources::Crust;
@@ -123,6 +123,61 @@ pub enum GpuError {
     /// A problem too large for one dispatch.
     #[error("{0}")]
     TooLarge(String),
+    /// A CPU system wrote the host crust while the device held newer fields (it did not pull
+    /// them first with [`sync_crust_to_host`] or [`GpuContext::pull`]); uploading the host copy
+    /// would silently lose the device's newer data.
+    #[error(
+        "the host crust was written while the device held newer fields ({0:?}); \
+         pull them first (gpu::sync_crust_to_host) before writing the crust"
+    )]
+    StaleHostWrite(FieldMask),
+}
+
+/// A set of the resident crust fields (bits), used to record which ones the device holds newer
+/// than the host [`Crust`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct FieldMask(pub u8);
+
+impl FieldMask {
+    /// No field.
+    pub const NONE: Self = Self(0);
+    /// Elevation.
+    pub const ELEVATION: Self = Self(1);
+    /// Crust age.
+    pub const AGE: Self = Self(2);
+    /// Orogeny.
+    pub const OROGENY: Self = Self(4);
+    /// Orogeny age.
+    pub const OROGENY_AGE: Self = Self(8);
+    /// Fold direction.
+    pub const FOLD_DIR: Self = Self(16);
+    /// Every field a kernel writes (crust type is never written on the device).
+    pub const ALL: Self = Self(31);
+    /// True when no bit is set.
+    pub fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+    /// True when every bit of `other` is set.
+    pub fn contains(self, other: Self) -> bool {
+        self.0 & other.0 == other.0
+    }
+    /// The bits set in both.
+    pub fn and(self, other: Self) -> Self {
+        Self(self.0 & other.0)
+    }
+}
+
+impl std::ops::BitOr for FieldMask {
+    type Output = Self;
+    fn bitor(self, rhs: Self) -> Self {
+        Self(self.0 | rhs.0)
+    }
+}
+
+impl std::ops::BitOrAssign for FieldMask {
+    fn bitor_assign(&mut self, rhs: Self) {
+        self.0 |= rhs.0;
+    }
 }
 
 /// Bytes that crossed the bus, both ways, since the context was made.
@@ -183,7 +238,12 @@ pub struct GpuContext {
     pub(crate) interpolate: resample_interpolate::InterpolateKernel,
     crust: Option<CrustBuffers>,
     crust_synced: Option<Tick>,
+    device_newer: FieldMask,
     staging: Option<wgpu::Buffer>,
+    orogeny_scratch: Vec<u8>,
+    /// Pull every field a kernel wrote right after the kernel (the behaviour before lazy host
+    /// sync; used by tests to check that lazy sync changes no result). Off by default.
+    pub eager_sync: bool,
     /// Bytes moved and dispatches made.
     pub traffic: GpuTraffic,
     /// The first failure of a kernel run by a system; the simulation stops with it.
@@ -315,7 +375,10 @@ impl GpuContext {
             interpolate,
             crust: None,
             crust_synced: None,
+            device_newer: FieldMask::NONE,
             staging: None,
+            orogeny_scratch: Vec::new(),
+            eager_sync: false,
             traffic: GpuTraffic::default(),
             failure: None,
         };
@@ -460,6 +523,10 @@ impl GpuContext {
     /// Makes the resident buffers hold `crust`: allocates them for its size and uploads every
     /// field unless the device copy is already in sync with the host change tick `host_tick`
     /// (pass `None` to force the upload).
+    ///
+    /// Fails with [`GpuError::StaleHostWrite`] instead of uploading when the device holds fields
+    /// newer than the host (see [`Self::device_newer`]): the host copy was written without a
+    /// pull, and uploading it would lose the device's data.
     pub fn sync_crust(&mut self, crust: &Crust, host_tick: Option<Tick>) -> Result<(), GpuError> {
         let n = crust.len();
         if self.crust.as_ref().is_some_and(|b| b.len == n)
@@ -467,6 +534,9 @@ impl GpuContext {
             && self.crust_synced == host_tick
         {
             return Ok(());
+        }
+        if !self.device_newer.is_empty() {
+            return Err(GpuError::StaleHostWrite(self.device_newer));
         }
         if self.crust.as_ref().is_none_or(|b| b.len != n) {
             let b = CrustBuffers {
@@ -513,6 +583,186 @@ impl GpuContext {
     /// Forgets the sync state, so the next kernel uploads the whole crust.
     pub fn invalidate_crust(&mut self) {
         self.crust_synced = None;
+    }
+
+    /// The resident fields the device holds newer than the host [`Crust`] (written by kernels
+    /// since the last pull).
+    pub fn device_newer(&self) -> FieldMask {
+        self.device_newer
+    }
+
+    /// Records that a kernel wrote `fields` on the device; with [`Self::eager_sync`] pulls them
+    /// into `crust` at once. Pass the crust through `bypass_change_detection` (a pull is not a
+    /// host write).
+    pub fn note_device_write(
+        &mut self,
+        fields: FieldMask,
+        crust: &mut Crust,
+    ) -> Result<(), GpuError> {
+        self.device_newer |= fields;
+        if self.eager_sync {
+            self.pull(crust, FieldMask::ALL)?;
+        }
+        Ok(())
+    }
+
+    /// The host is authoritative again (a new crust was installed: resampling, load): forgets
+    /// which fields the device held newer.
+    pub fn supersede_device(&mut self) {
+        self.device_newer = FieldMask::NONE;
+    }
+
+    /// Downloads the fields of `mask` that the device holds newer into `crust` and clears their
+    /// bits; fields already in sync cost nothing. Write to the crust through
+    /// `bypass_change_detection` (or [`sync_crust_to_host`]): a pull must not move the crust's
+    /// change tick, or the next kernel would upload the whole crust again.
+    pub fn pull(&mut self, crust: &mut Crust, mask: FieldMask) -> Result<(), GpuError> {
+        const KERNEL: &str = "crust pull";
+        let want = self.device_newer.and(mask);
+        if want.is_empty() {
+            return Ok(());
+        }
+        let Some((n, z, age, og, oga, fold)) = self.crust.as_ref().map(|b| {
+            (
+                b.len,
+                b.elevation_km.clone(),
+                b.age_my.clone(),
+                b.orogeny.clone(),
+                b.orogeny_age_my.clone(),
+                b.fold_dir.clone(),
+            )
+        }) else {
+            return Err(GpuError::Kernel {
+                kernel: KERNEL,
+                message: "the device holds newer fields but no crust buffers".into(),
+            });
+        };
+        if crust.len() != n {
+            return Err(GpuError::Kernel {
+                kernel: KERNEL,
+                message: format!("host crust has {} samples, device crust {n}", crust.len()),
+            });
+        }
+        if want.contains(FieldMask::ELEVATION) {
+            self.download(
+                KERNEL,
+                &z,
+                bytemuck::cast_slice_mut(&mut crust.elevation_km),
+            )?;
+            self.device_newer.0 &= !FieldMask::ELEVATION.0;
+        }
+        if want.contains(FieldMask::AGE) {
+            self.download(KERNEL, &age, bytemuck::cast_slice_mut(&mut crust.age_my))?;
+            self.device_newer.0 &= !FieldMask::AGE.0;
+        }
+        if want.contains(FieldMask::OROGENY_AGE) {
+            self.download(
+                KERNEL,
+                &oga,
+                bytemuck::cast_slice_mut(&mut crust.orogeny_age_my),
+            )?;
+            self.device_newer.0 &= !FieldMask::OROGENY_AGE.0;
+        }
+        if want.contains(FieldMask::FOLD_DIR) {
+            self.download(KERNEL, &fold, bytemuck::cast_slice_mut(&mut crust.fold_dir))?;
+            self.device_newer.0 &= !FieldMask::FOLD_DIR.0;
+        }
+        if want.contains(FieldMask::OROGENY) {
+            let mut scratch = std::mem::take(&mut self.orogeny_scratch);
+            scratch.resize(n, 0);
+            let r = self.download(KERNEL, &og, &mut scratch);
+            let decoded = r.and_then(|()| decode_orogeny(&scratch, &mut crust.orogeny, KERNEL));
+            self.orogeny_scratch = scratch;
+            decoded?;
+            self.device_newer.0 &= !FieldMask::OROGENY.0;
+        }
+        Ok(())
+    }
+}
+
+/// Decodes the device's orogeny bytes into `out`; errors name `kernel`.
+pub(crate) fn decode_orogeny(
+    bytes: &[u8],
+    out: &mut [crate::resources::Orogeny],
+    kernel: &'static str,
+) -> Result<(), GpuError> {
+    use crate::resources::Orogeny;
+    let mut bad = None;
+    for (i, (o, &b)) in out.iter_mut().zip(bytes).enumerate() {
+        *o = match b {
+            0 => Orogeny::None,
+            1 => Orogeny::Andean,
+            2 => Orogeny::Himalayan,
+            _ => {
+                bad = Some((i, b));
+                Orogeny::None
+            }
+        };
+    }
+    match bad {
+        Some((i, b)) => Err(GpuError::Kernel {
+            kernel,
+            message: format!("orogeny code {b} at sample {i}"),
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Pulls the fields of `mask` that the device holds newer into the world's [`Crust`] (without
+/// moving its change tick); does nothing on the CPU backend. Call it before any CPU code reads
+/// device-written fields or writes the crust (see docs/gpu-residency.md).
+pub fn sync_crust_to_host(world: &mut World, mask: FieldMask) -> Result<(), GpuError> {
+    if world
+        .get_resource::<GpuContext>()
+        .is_none_or(|g| g.device_newer.and(mask).is_empty())
+    {
+        return Ok(());
+    }
+    world.resource_scope(|world, mut gpu: Mut<GpuContext>| {
+        match world.get_resource_mut::<Crust>() {
+            Some(mut crust) => gpu.pull(crust.bypass_change_detection(), mask),
+            None => Ok(()),
+        }
+    })
+}
+
+/// [`sync_crust_to_host`] from an exclusive system: on failure records the error in the context
+/// (the step then stops with it) and returns false.
+pub fn sync_crust_to_host_or_record(world: &mut World, mask: FieldMask) -> bool {
+    match sync_crust_to_host(world, mask) {
+        Ok(()) => true,
+        Err(e) => {
+            tracing::error!("{e}");
+            if let Some(mut g) = world.get_resource_mut::<GpuContext>()
+                && g.failure.is_none()
+            {
+                g.failure = Some(e);
+            }
+            false
+        }
+    }
+}
+
+/// From a system: pulls the fields of `mask` into `crust` (without moving its change tick).
+/// On failure records the error in the context (the step then stops with it) and returns false.
+pub fn pull_or_record(
+    gpu: &mut GpuContext,
+    crust: &mut impl DetectChangesMut<Inner = Crust>,
+    mask: FieldMask,
+) -> bool {
+    if gpu.device_newer.and(mask).is_empty() {
+        return true;
+    }
+    if gpu.failure.is_some() {
+        return false;
+    }
+    match gpu.pull(crust.bypass_change_detection(), mask) {
+        Ok(()) => true,
+        Err(e) => {
+            tracing::error!("{e}");
+            gpu.failure = Some(e);
+            false
+        }
     }
 }
 

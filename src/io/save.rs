@@ -655,6 +655,8 @@ const CRUST_FIELDS: [(&str, u8); 9] = [
 ];
 
 fn save_crust(world: &mut World, w: &mut SectionWriter) -> Result<(), String> {
+    // On the GPU backend, the fields the device holds newer come down first.
+    crate::gpu::sync_crust_to_host(world, crate::gpu::FieldMask::ALL).map_err(|e| e.to_string())?;
     let c = world.resource::<Crust>();
     let n = c.len();
     let lens = [

@@ -4,7 +4,7 @@
 use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 
-use crate::gpu::{GpuContext, run_or_record};
+use crate::gpu::{FieldMask, GpuContext, run_or_record};
 use crate::io::params::Params;
 use crate::resources::{Crust, Orogeny};
 
@@ -34,22 +34,13 @@ pub fn age_crust(params: Res<Params>, mut crust: ResMut<Crust>, gpu: Option<ResM
         let done = run_or_record(&mut gpu, |g| {
             g.sync_crust(&crust, Some(tick))?;
             crate::gpu::aging::aging_dispatch(g, dt)?;
-            let bufs = g
-                .crust_buffers()
-                .map(|b| (b.age_my.clone(), b.orogeny_age_my.clone()));
-            if let Some((age, oga)) = bufs {
-                let crust = &mut *crust;
-                g.download("aging", &age, bytemuck::cast_slice_mut(&mut crust.age_my))?;
-                g.download(
-                    "aging",
-                    &oga,
-                    bytemuck::cast_slice_mut(&mut crust.orogeny_age_my),
-                )?;
-            }
-            Ok(())
+            // The host copy is pulled lazily, by the next CPU reader (see gpu::FieldMask).
+            g.note_device_write(
+                FieldMask::AGE | FieldMask::OROGENY_AGE,
+                crust.bypass_change_detection(),
+            )
         });
         if done {
-            gpu.mark_crust_synced(crust.last_changed());
             return;
         }
     }

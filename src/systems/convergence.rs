@@ -48,7 +48,7 @@ use crate::components::{
     Terrane,
 };
 use crate::geometry::SphereMesh;
-use crate::gpu::{GpuContext, run_or_record};
+use crate::gpu::{FieldMask, GpuContext, run_or_record};
 use crate::io::params::Params;
 use crate::resources::convergence::NONE;
 use crate::resources::{
@@ -577,11 +577,17 @@ pub fn build_terranes(world: &mut World) {
 /// accumulated since the last resampling.
 pub fn track_fronts(
     mesh: Res<SphereMesh>,
-    crust: Res<Crust>,
+    mut crust: ResMut<Crust>,
     params: Res<Params>,
     plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
     mut fp: ResMut<FrontPoints>,
+    gpu: Option<ResMut<GpuContext>>,
 ) {
+    // On the GPU backend the elevation may be newer on the device (lazy host sync).
+    if let Some(mut gpu) = gpu {
+        crate::gpu::pull_or_record(&mut gpu, &mut crust, FieldMask::ELEVATION);
+    }
+    let crust: &Crust = &crust;
     let table = PlateTable::from_query(&plates);
     let r_km = params.planet.radius_km;
     let dt = params.time.time_step_my as f32;
@@ -773,10 +779,16 @@ pub fn subduction_uplift(
                 &field,
                 Some(field_tick),
             )?;
-            crate::gpu::subduction_uplift::read_back(g, &mut crust)
+            // The host copy is pulled lazily, by the next CPU reader (see gpu::FieldMask).
+            g.note_device_write(
+                FieldMask::ELEVATION
+                    | FieldMask::OROGENY
+                    | FieldMask::OROGENY_AGE
+                    | FieldMask::FOLD_DIR,
+                crust.bypass_change_detection(),
+            )
         });
         if done {
-            gpu.mark_crust_synced(crust.last_changed());
             return;
         }
     }

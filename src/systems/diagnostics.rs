@@ -7,6 +7,7 @@ use rayon::prelude::*;
 
 use crate::components::Plate;
 use crate::geometry::SphereMesh;
+use crate::gpu::{FieldMask, GpuContext};
 use crate::resources::{Crust, CrustStats, CrustType, NonFinite};
 
 /// Chunk size of deterministic reductions.
@@ -58,14 +59,24 @@ pub fn crust_stats(mesh: &SphereMesh, crust: &Crust) -> CrustStats {
 pub struct CrustHealth(pub Option<NonFinite>);
 
 /// Refreshes [`CrustStats`] and [`CrustHealth`].
+///
+/// On the GPU backend the elevation is pulled from the device first (lazy host sync; 4 bytes a
+/// sample). The other device-written fields (ages, fold direction) are checked as of their last
+/// pull, at the latest the last resampling, until a reduction kernel does the check on the
+/// device (docs/gpu-residency.md, stage 1).
 pub fn update_diagnostics(
     mesh: Res<SphereMesh>,
-    crust: Res<Crust>,
+    mut crust: ResMut<Crust>,
     plates: Query<&Plate>,
     mut stats: ResMut<CrustStats>,
     mut health: ResMut<CrustHealth>,
+    gpu: Option<ResMut<GpuContext>>,
 ) {
-    let mut s = crust_stats(&mesh, &crust);
+    if let Some(mut gpu) = gpu {
+        crate::gpu::pull_or_record(&mut gpu, &mut crust, FieldMask::ELEVATION);
+    }
+    let crust: &Crust = &crust;
+    let mut s = crust_stats(&mesh, crust);
     s.plates = plates.iter().count();
     *stats = s;
     health.0 = crust.check_finite().err();

@@ -13,7 +13,7 @@
 use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 
-use crate::gpu::{GpuContext, run_or_record};
+use crate::gpu::{FieldMask, GpuContext, run_or_record};
 use crate::io::params::Params;
 use crate::resources::{Crust, CrustType};
 
@@ -87,18 +87,10 @@ pub fn erode(params: Res<Params>, mut crust: ResMut<Crust>, gpu: Option<ResMut<G
         let done = run_or_record(&mut gpu, |g| {
             g.sync_crust(&crust, Some(tick))?;
             crate::gpu::erosion::erosion_dispatch(g, &rates)?;
-            let b = g.crust_buffers().map(|b| b.elevation_km.clone());
-            if let Some(b) = b {
-                g.download(
-                    "erosion",
-                    &b,
-                    bytemuck::cast_slice_mut(&mut crust.elevation_km),
-                )?;
-            }
-            Ok(())
+            // The host copy is pulled lazily, by the next CPU reader (see gpu::FieldMask).
+            g.note_device_write(FieldMask::ELEVATION, crust.bypass_change_detection())
         });
         if done {
-            gpu.mark_crust_synced(crust.last_changed());
             return;
         }
     }

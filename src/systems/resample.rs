@@ -910,7 +910,7 @@ pub fn resample_due(
 #[allow(clippy::too_many_arguments)]
 pub fn resample_interpolate(
     mesh: Res<SphereMesh>,
-    crust: Res<Crust>,
+    mut crust: ResMut<Crust>,
     clock: Res<SimClock>,
     params: Res<Params>,
     plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
@@ -922,6 +922,14 @@ pub fn resample_interpolate(
     mut timings: Option<ResMut<StepTimings>>,
 ) {
     let started = Instant::now();
+    // On the GPU backend, every field the kernels wrote since the last pull comes down first
+    // (lazy host sync): the resampling reads the whole old crust. Systems before this one in
+    // the resampling (`collide_before_resample`) read only plate and crust type, which no
+    // kernel writes.
+    if let Some(g) = gpu.as_mut() {
+        crate::gpu::pull_or_record(g, &mut crust, crate::gpu::FieldMask::ALL);
+    }
+    let crust: &Crust = &crust;
     let table = PlateTable::from_query(&plates);
     let work = &mut *work;
     // Pending sutures: which old samples move to which plate.
@@ -1051,6 +1059,12 @@ pub fn resample_rebuild(world: &mut World) {
     {
         let mut crust = world.resource_mut::<Crust>();
         std::mem::swap(&mut *crust, &mut next);
+    }
+    // The new crust is the host's: whatever the device held newer (pulled before the
+    // interpolation) is superseded.
+    if let Some(mut g) = world.get_resource_mut::<GpuContext>() {
+        debug_assert!(g.device_newer().is_empty(), "{:?}", g.device_newer());
+        g.supersede_device();
     }
     // Keep the old buffers for the next resampling.
     world.resource_mut::<ResampleWork>().next = next;

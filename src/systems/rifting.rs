@@ -317,6 +317,9 @@ pub fn rift_plate(
         ids.push(id);
     }
     world.resource_mut::<NextPlateId>().0 = next_id;
+    // On the GPU backend the host must hold every field before it writes the crust (the write
+    // makes the next kernel upload the whole host crust).
+    crate::gpu::sync_crust_to_host_or_record(world, crate::gpu::FieldMask::ALL);
     {
         let mut crust = world.resource_mut::<Crust>();
         for (&s, &l) in samples.iter().zip(&labels) {

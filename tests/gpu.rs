@@ -24,7 +24,9 @@ use tectonic_planets::gpu::resample_locate::{
 use tectonic_planets::gpu::subduction_uplift::{
     UpliftConstants, read_back, subduction_uplift_cpu, subduction_uplift_dispatch,
 };
-use tectonic_planets::gpu::{BackendChoice, GpuContext, shader_source};
+use tectonic_planets::gpu::{
+    BackendChoice, FieldMask, GpuContext, GpuError, pull_or_record, shader_source,
+};
 use tectonic_planets::prelude::*;
 use tectonic_planets::random::SimRng;
 use tectonic_planets::resources::convergence::NONE;
@@ -906,4 +908,155 @@ fn gpu_backend_gives_the_same_bits_with_one_thread_or_two() {
         cpu.crust().hash(),
         "GPU run is bit-identical to the CPU run"
     );
+}
+
+/// A GPU-backend simulation at `samples` samples, seed `seed`; with `eager`, every kernel's
+/// output is pulled to the host at once (the behaviour before lazy host sync).
+fn gpu_sim(samples: u64, seed: u64, eager: bool) -> Simulation {
+    let mut sim = Simulation::new(common::params(samples, seed)).expect("sim");
+    sim.set_backend(BackendChoice::Gpu).expect("gpu backend");
+    sim.world_mut().resource_mut::<GpuContext>().eager_sync = eager;
+    sim
+}
+
+/// Steps `sim` 30 times, asking for a resampling before steps 8 and 19 (others come on their
+/// own); returns the device-newer masks seen after each step (before any pull).
+fn thirty_steps_with_resamplings(sim: &mut Simulation) -> Vec<FieldMask> {
+    let mut masks = Vec::new();
+    for k in 0..30 {
+        if k == 8 || k == 19 {
+            sim.request_resample();
+        }
+        sim.step().expect("step");
+        masks.push(sim.world().resource::<GpuContext>().device_newer());
+    }
+    masks
+}
+
+#[test]
+fn lazy_host_sync_gives_the_same_bits_as_pulling_after_every_kernel() {
+    if gpu_or_skip("lazy sync").is_none() {
+        return;
+    }
+    let mut eager = gpu_sim(20_000, 9, true);
+    let mut lazy = gpu_sim(20_000, 9, false);
+    let eager_masks = thirty_steps_with_resamplings(&mut eager);
+    let lazy_masks = thirty_steps_with_resamplings(&mut lazy);
+    // Eager mode really pulled everything; lazy mode really left fields on the device.
+    assert!(eager_masks.iter().all(|m| m.is_empty()), "{eager_masks:?}");
+    assert!(
+        lazy_masks.iter().filter(|m| !m.is_empty()).count() >= 20,
+        "{lazy_masks:?}"
+    );
+    let resamplings = lazy.clock().resamplings;
+    assert!(resamplings >= 2, "{resamplings} resamplings");
+    assert_eq!(resamplings, eager.clock().resamplings);
+    let (he, hl) = (eager.state_hash(), lazy.state_hash());
+    eprintln!(
+        "state hash after 30 steps, {resamplings} resamplings: eager {he:016x}, lazy {hl:016x}"
+    );
+    assert_eq!(he, hl, "lazy host sync changed the result");
+    assert!(
+        lazy.world()
+            .resource::<GpuContext>()
+            .device_newer()
+            .is_empty()
+    );
+    assert_eq!(eager.crust().hash(), lazy.crust().hash());
+}
+
+#[test]
+fn a_steady_gpu_step_reads_back_a_few_bytes_per_sample() {
+    if gpu_or_skip("steady-step traffic").is_none() {
+        return;
+    }
+    let n = 20_000u64;
+    let mut sim = gpu_sim(n, 9, false);
+    sim.step().expect("first step");
+    let mut measured = Vec::new();
+    for _ in 0..12 {
+        let before = sim.world().resource::<GpuContext>().traffic;
+        let (resamplings, since) = (sim.clock().resamplings, sim.clock().steps_since_resample);
+        sim.step().expect("step");
+        let after = sim.world().resource::<GpuContext>().traffic;
+        // Steady: neither a resampling step nor the step after one (whose first kernel uploads
+        // the crust the resampling rebuilt on the host).
+        if sim.clock().resamplings != resamplings || since == 0 {
+            continue;
+        }
+        measured.push((
+            (after.downloaded_bytes - before.downloaded_bytes) as f64 / n as f64,
+            (after.uploaded_bytes - before.uploaded_bytes) as f64 / n as f64,
+            after.crust_uploads - before.crust_uploads,
+        ));
+    }
+    eprintln!("steady steps (down B/sample, up B/sample, full crust uploads): {measured:?}");
+    assert!(measured.len() >= 5, "{measured:?}");
+    for &(down, _, uploads) in &measured {
+        // Before lazy sync: 33 B/sample (4 erosion + 21 uplift + 8 aging). Now the elevation
+        // (4 B) that diagnostics and the next step's fronts read.
+        assert!(down <= 5.0, "{down} B/sample read back in a steady step");
+        // The pulls do not move the crust's change tick, so nothing goes up in full again.
+        assert_eq!(uploads, 0, "{measured:?}");
+    }
+}
+
+fn write_one_elevation(mut crust: ResMut<Crust>) {
+    crust.elevation_km[0] = 1.0;
+}
+
+fn pull_then_write_one_elevation(mut crust: ResMut<Crust>, mut gpu: ResMut<GpuContext>) {
+    assert!(pull_or_record(&mut gpu, &mut crust, FieldMask::ALL));
+    crust.elevation_km[0] = 1.0;
+}
+
+#[test]
+fn writing_the_host_crust_while_the_device_is_newer_is_an_error() {
+    if gpu_or_skip("stale write guard").is_none() {
+        return;
+    }
+    // A system that writes the crust after erosion without pulling: aging would upload the
+    // stale host copy over the device's newer elevation and orogeny, so the step fails.
+    let mut bad = gpu_sim(10_000, 3, false);
+    bad.app_mut().add_systems(
+        TectonicStep,
+        write_one_elevation.in_set(TectonicSystems::SlabPull),
+    );
+    match bad.step() {
+        Err(SimError::Gpu(GpuError::StaleHostWrite(mask))) => {
+            assert!(mask.contains(FieldMask::ELEVATION), "{mask:?}")
+        }
+        other => panic!("expected a stale-write error, got {other:?}"),
+    }
+    // The same write after a pull is fine.
+    let mut good = gpu_sim(10_000, 3, false);
+    good.app_mut().add_systems(
+        TectonicStep,
+        pull_then_write_one_elevation.in_set(TectonicSystems::SlabPull),
+    );
+    good.run_steps(3).expect("steps with a pulled write");
+}
+
+#[test]
+fn switching_to_the_cpu_backend_mid_run_keeps_the_device_fields() {
+    if gpu_or_skip("backend switch").is_none() {
+        return;
+    }
+    let mut reference = gpu_sim(10_000, 4, false);
+    let mut switched = gpu_sim(10_000, 4, false);
+    for _ in 0..6 {
+        reference.step().expect("step");
+        switched.step().expect("step");
+    }
+    assert!(
+        !switched
+            .world()
+            .resource::<GpuContext>()
+            .device_newer()
+            .is_empty()
+    );
+    switched
+        .set_backend(BackendChoice::Cpu)
+        .expect("cpu backend");
+    assert_eq!(switched.state_hash(), reference.state_hash());
 }

@@ -968,7 +968,7 @@ pub fn resample_interpolate(
             crate::gpu::resample_locate::resample_locate_gpu(
                 g,
                 &mesh,
-                &crust,
+                crust,
                 &table,
                 &rules,
                 &mut work.sources,
@@ -977,7 +977,7 @@ pub fn resample_interpolate(
         })
     });
     if !on_gpu {
-        resample_locate_cpu(&mesh, &crust, &table, &rules, &mut work.sources);
+        resample_locate_cpu(&mesh, crust, &table, &rules, &mut work.sources);
     }
     if let Some(timings) = timings.as_mut() {
         timings.record("resample_locate", t.elapsed());
@@ -1010,7 +1010,7 @@ pub fn resample_interpolate(
             crate::gpu::resample_interpolate::resample_interpolate_gpu(
                 g,
                 &mesh,
-                &crust,
+                crust,
                 &table,
                 &work.sources,
                 &mut work.next,
@@ -1018,7 +1018,7 @@ pub fn resample_interpolate(
         })
     });
     if !interpolated_on_gpu {
-        interpolate(&mesh, &crust, &table, &work.sources, &mut work.next);
+        interpolate(&mesh, crust, &table, &work.sources, &mut work.next);
     }
     if let Some(timings) = timings.as_mut() {
         timings.record("resample_interpolate", t.elapsed());

@@ -1060,3 +1060,19 @@ fn switching_to_the_cpu_backend_mid_run_keeps_the_device_fields() {
         .expect("cpu backend");
     assert_eq!(switched.state_hash(), reference.state_hash());
 }
+
+#[test]
+fn hotspots_on_the_gpu_backend_pull_before_they_write() {
+    if gpu_or_skip("hotspots on gpu").is_none() {
+        return;
+    }
+    // The hotspot plugin writes the crust every step; it pulls first, so lazy sync neither
+    // fails (stale write) nor changes the result.
+    let run = |eager: bool| {
+        let mut sim = gpu_sim(10_000, 6, eager);
+        sim.set_enabled("hotspots", true).expect("hotspots");
+        sim.run_steps(12).expect("steps with hotspots");
+        sim.state_hash()
+    };
+    assert_eq!(run(false), run(true));
+}

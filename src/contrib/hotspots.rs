@@ -335,11 +335,11 @@ fn build_and_subside(
     hotspots: Query<&Hotspot>,
     mut edifices: Query<(Entity, &mut Edifice)>,
     mut marks: Local<Marks>,
-    gpu: Option<ResMut<crate::gpu::GpuContext>>,
+    gpu: Option<ResMut<GpuContext>>,
 ) {
     // On the GPU backend, pull what the device holds newer before reading and writing the crust.
     if let Some(mut gpu) = gpu {
-        crate::gpu::pull_or_record(&mut gpu, &mut crust, crate::gpu::FieldMask::ALL);
+        pull_or_record(&mut gpu, &mut crust, FieldMask::ALL);
     }
     let s = HotspotSettings::from_registry(&plugin_params);
     let dt = params.time.time_step_my;

@@ -441,6 +441,33 @@ struct RandomPlates {
     suture_target: Vec<u32>,
 }
 
+impl RandomPlates {
+    /// The overlap rules over this configuration's pairs and sutures.
+    fn rules(&self) -> OverlapRules<'_> {
+        OverlapRules {
+            pairs: &self.pairs,
+            suture_of_sample: &self.suture_of_sample,
+            suture_target: &self.suture_target,
+        }
+    }
+}
+
+/// The inputs of a resampling kernel's parity test: the device (or `None`: skipped), a fresh
+/// seed (printed, with how to replay it), a mesh of `N` samples and a random plate
+/// configuration drawn from random stream `stream` (and the stream, for more draws).
+fn random_case(
+    kernel: &str,
+    stream: u64,
+) -> Option<(GpuContext, u64, SimRng, SphereMesh, RandomPlates)> {
+    let ctx = gpu_or_skip(kernel)?;
+    let seed = fresh_seed("GPU_TEST_SEED");
+    eprintln!("{kernel}: seed {seed} (GPU_TEST_SEED={seed} replays it)");
+    let mut rng = SimRng::new(seed, stream);
+    let mesh = SphereMesh::fibonacci(N, 0.3, seed, 6370.0).expect("mesh");
+    let plates = random_plates(&mesh, &mut rng, 0.05);
+    Some((ctx, seed, rng, mesh, plates))
+}
+
 /// A random plate configuration on `mesh`: 8 to 19 Voronoi plates, continental blobs across
 /// plate boundaries, every plate turned by a fresh random rotation of up to `max_angle` radians
 /// (several sample spacings: overlaps and gaps), override pairs for about half of the ordered
@@ -541,27 +568,13 @@ fn discrete(s: &SampleSource) -> (u32, u32, u32, bool, u32) {
 
 #[test]
 fn resample_locate_kernel_matches_cpu_reference() {
-    let Some(mut ctx) = gpu_or_skip("resample_locate") else {
+    let Some((mut ctx, seed, _, mesh, plates)) = random_case("resample_locate", 4) else {
         return;
     };
-    let seed = fresh_seed("GPU_TEST_SEED");
-    eprintln!("resample_locate: seed {seed} (GPU_TEST_SEED={seed} replays it)");
-    let mut rng = SimRng::new(seed, 4);
-    let mesh = SphereMesh::fibonacci(N, 0.3, seed, 6370.0).expect("mesh");
-    let RandomPlates {
-        crust,
-        table,
-        pairs,
-        suture_of_sample,
-        suture_target,
-    } = random_plates(&mesh, &mut rng, 0.05);
-    let rules = OverlapRules {
-        pairs: &pairs,
-        suture_of_sample: &suture_of_sample,
-        suture_target: &suture_target,
-    };
+    let (crust, table, pairs, rules) =
+        (&plates.crust, &plates.table, &plates.pairs, plates.rules());
     let mut cpu = Vec::new();
-    resample_locate_cpu(&mesh, &crust, &table, &rules, &mut cpu);
+    resample_locate_cpu(&mesh, crust, table, &rules, &mut cpu);
     let gaps = cpu.iter().filter(|s| s.is_gap()).count();
     let sutured = cpu.iter().filter(|s| s.suture != u32::MAX).count();
     let lost = cpu.iter().filter(|s| s.continental_lost).count();
@@ -577,9 +590,9 @@ fn resample_locate_kernel_matches_cpu_reference() {
 
     // The kernel alone. Its output starts poisoned (the host vector is all ones: NaN weights,
     // gaps), so a dispatch or readback that writes nothing cannot pass.
-    let cells = CellPlates::build(&mesh, &crust, &table);
+    let cells = CellPlates::build(&mesh, crust, table);
     let (raw, doubtful) =
-        resample_locate_raw(&mut ctx, &mesh, &crust, &table, &rules, &cells).expect("kernel");
+        resample_locate_raw(&mut ctx, &mesh, crust, table, &rules, &cells).expect("kernel");
     let mut is_doubtful = vec![false; N];
     for &j in &doubtful {
         is_doubtful[j as usize] = true;
@@ -624,8 +637,7 @@ fn resample_locate_kernel_matches_cpu_reference() {
 
     // The whole GPU location (flagged samples redone on the CPU), then the CPU interpolation.
     let mut gpu = vec![SampleSource::default(); 3];
-    let report =
-        resample_locate_gpu(&mut ctx, &mesh, &crust, &table, &rules, &mut gpu).expect("gpu");
+    let report = resample_locate_gpu(&mut ctx, &mesh, crust, table, &rules, &mut gpu).expect("gpu");
     assert_eq!(gpu.len(), N);
     assert_eq!(report.rechecked, doubtful.len());
     let mismatch = (0..N)
@@ -638,8 +650,8 @@ fn resample_locate_kernel_matches_cpu_reference() {
         "seed {seed}: gaps differ"
     );
     let (mut next_cpu, mut next_gpu) = (Crust::default(), Crust::default());
-    interpolate(&mesh, &crust, &table, &cpu, &mut next_cpu);
-    interpolate(&mesh, &crust, &table, &gpu, &mut next_gpu);
+    interpolate(&mesh, crust, table, &cpu, &mut next_cpu);
+    interpolate(&mesh, crust, table, &gpu, &mut next_gpu);
     // Tolerance: elevation within 1 m (weights differ by ~1e-5 over ±10 km of relief), except
     // at samples located differently or whose crust type vote (a weight sum at 1/2) flipped:
     // at most 0.1% of the samples.
@@ -659,48 +671,33 @@ fn resample_locate_kernel_matches_cpu_reference() {
 
 #[test]
 fn resample_interpolate_kernel_matches_cpu_reference() {
-    let Some(mut ctx) = gpu_or_skip("resample_interpolate") else {
+    let Some((mut ctx, seed, mut rng, mesh, plates)) = random_case("resample_interpolate", 6)
+    else {
         return;
     };
-    let seed = fresh_seed("GPU_TEST_SEED");
-    eprintln!("resample_interpolate: seed {seed} (GPU_TEST_SEED={seed} replays it)");
-    let mut rng = SimRng::new(seed, 6);
-    let mesh = SphereMesh::fibonacci(N, 0.3, seed, 6370.0).expect("mesh");
-    let RandomPlates {
-        crust,
-        table,
-        pairs,
-        suture_of_sample,
-        suture_target,
-    } = random_plates(&mesh, &mut rng, 0.05);
-    let rules = OverlapRules {
-        pairs: &pairs,
-        suture_of_sample: &suture_of_sample,
-        suture_target: &suture_target,
-    };
+    let (crust, table, rules) = (&plates.crust, plates.table.clone(), plates.rules());
     let mut sources = Vec::new();
-    resample_locate_cpu(&mesh, &crust, &table, &rules, &mut sources);
+    resample_locate_cpu(&mesh, crust, &table, &rules, &mut sources);
     // Plates 0 and 1 move alike for the interpolation (same rotation), so the vertices of one
     // count for the other (the frame-group rule).
     let mut table = table;
     let m = table.plates[0].world_from_plate;
     table.plates[1].world_from_plate = m;
     let mut cpu = Crust::default();
-    resample_interpolate_cpu(&mesh, &crust, &table, &sources, &mut cpu);
+    resample_interpolate_cpu(&mesh, crust, &table, &sources, &mut cpu);
     // The output starts as garbage of the wrong size: everything must come from the device.
     let mut gpu = random_crust(7, &mut rng);
     // Bad input is an error, not a panic or an out-of-bounds read on the device.
     assert!(
-        resample_interpolate_gpu(&mut ctx, &mesh, &crust, &table, &sources[..5], &mut gpu).is_err()
+        resample_interpolate_gpu(&mut ctx, &mesh, crust, &table, &sources[..5], &mut gpu).is_err()
     );
     let mut bad = sources.clone();
     if let Some(s) = bad.iter_mut().find(|s| !s.is_gap()) {
         s.triangle = u32::MAX;
     }
-    let err =
-        resample_interpolate_gpu(&mut ctx, &mesh, &crust, &table, &bad, &mut gpu).unwrap_err();
+    let err = resample_interpolate_gpu(&mut ctx, &mesh, crust, &table, &bad, &mut gpu).unwrap_err();
     assert!(err.to_string().contains("out of range"), "{err}");
-    resample_interpolate_gpu(&mut ctx, &mesh, &crust, &table, &sources, &mut gpu).expect("kernel");
+    resample_interpolate_gpu(&mut ctx, &mesh, crust, &table, &sources, &mut gpu).expect("kernel");
     assert_eq!(gpu.len(), N);
     let gaps = sources.iter().filter(|s| s.is_gap()).count();
     let mixed = (0..N)

@@ -481,35 +481,10 @@ fn amplify_shader_validates_and_matches_the_rust_layout() {
     }
 }
 
-/// A random crust on `mesh`: elevations from −8 to +6 km, half continental, a third of it in
-/// each orogeny (none, Andean, Himalayan), random ages, fold and ridge directions.
+/// A random crust on `mesh`: elevations from −8 to +6 km, orogeny ages up to 300 My (see
+/// `common::random_crust`).
 fn random_crust(mesh: &SphereMesh, rng: &mut SimRng) -> Crust {
-    let mut c = Crust::with_len(mesh.len());
-    let v = |rng: &mut SimRng| {
-        [
-            (rng.next_f64() - 0.5) as f32,
-            (rng.next_f64() - 0.5) as f32,
-            (rng.next_f64() - 0.5) as f32,
-        ]
-    };
-    for i in 0..mesh.len() {
-        c.elevation_km[i] = (rng.next_f64() * 14.0 - 8.0) as f32;
-        c.crust_type[i] = if rng.next_f64() < 0.5 {
-            CrustType::Continental
-        } else {
-            CrustType::Oceanic
-        };
-        c.age_my[i] = (rng.next_f64() * 300.0) as f32;
-        c.orogeny[i] = match (rng.next_f64() * 3.0) as u32 {
-            0 => Orogeny::None,
-            1 => Orogeny::Andean,
-            _ => Orogeny::Himalayan,
-        };
-        c.orogeny_age_my[i] = (rng.next_f64() * 300.0) as f32;
-        c.fold_dir[i] = v(rng);
-        c.ridge_dir[i] = v(rng);
-    }
-    c
+    common::random_crust(mesh.len(), rng, (-8.0, 6.0), 300.0)
 }
 
 /// Tolerance of the GPU amplification against `amplify_cpu`, per value (docs/amplification.md):

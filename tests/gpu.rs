@@ -86,31 +86,10 @@ fn every_shader_validates_with_naga() {
     assert!(validate(&broken).is_err(), "naga accepted a type error");
 }
 
-/// A random crust of `n` samples: elevations from −10 to +10 km, half continental, a third
-/// with an orogeny, random ages and fold directions.
+/// A random crust of `n` samples: elevations from −10 to +10 km, orogeny ages up to 100 My
+/// (see `common::random_crust`).
 fn random_crust(n: usize, rng: &mut SimRng) -> Crust {
-    let mut c = Crust::with_len(n);
-    for i in 0..n {
-        c.elevation_km[i] = (rng.next_f64() * 20.0 - 10.0) as f32;
-        c.crust_type[i] = if rng.next_f64() < 0.5 {
-            CrustType::Continental
-        } else {
-            CrustType::Oceanic
-        };
-        c.age_my[i] = (rng.next_f64() * 300.0) as f32;
-        c.orogeny[i] = match (rng.next_f64() * 3.0) as u32 {
-            0 => Orogeny::None,
-            1 => Orogeny::Andean,
-            _ => Orogeny::Himalayan,
-        };
-        c.orogeny_age_my[i] = (rng.next_f64() * 100.0) as f32;
-        c.fold_dir[i] = [
-            (rng.next_f64() - 0.5) as f32,
-            (rng.next_f64() - 0.5) as f32,
-            (rng.next_f64() - 0.5) as f32,
-        ];
-    }
-    c
+    common::random_crust(n, rng, (-10.0, 10.0), 100.0)
 }
 
 /// Reads a device f32 buffer into a NaN-poisoned vector, so a readback that copies nothing

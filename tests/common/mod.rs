@@ -113,3 +113,41 @@ pub fn fresh_seed(replay: &str) -> u64 {
         .map(|d| d.as_nanos() as u64)
         .unwrap_or(1)
 }
+
+/// A random crust of `n` samples for kernel parity tests: elevations uniform in `elevation_km`,
+/// half continental, a third of it in each orogeny (none, Andean, Himalayan), ages up to 300 My,
+/// orogeny ages up to `orogeny_age_max_my`, random fold and ridge directions.
+pub fn random_crust(
+    n: usize,
+    rng: &mut tectonic_planets::random::SimRng,
+    elevation_km: (f64, f64),
+    orogeny_age_max_my: f64,
+) -> Crust {
+    let mut c = Crust::with_len(n);
+    let v = |rng: &mut tectonic_planets::random::SimRng| {
+        [
+            (rng.next_f64() - 0.5) as f32,
+            (rng.next_f64() - 0.5) as f32,
+            (rng.next_f64() - 0.5) as f32,
+        ]
+    };
+    let (lo, hi) = elevation_km;
+    for i in 0..n {
+        c.elevation_km[i] = (lo + rng.next_f64() * (hi - lo)) as f32;
+        c.crust_type[i] = if rng.next_f64() < 0.5 {
+            CrustType::Continental
+        } else {
+            CrustType::Oceanic
+        };
+        c.age_my[i] = (rng.next_f64() * 300.0) as f32;
+        c.orogeny[i] = match (rng.next_f64() * 3.0) as u32 {
+            0 => Orogeny::None,
+            1 => Orogeny::Andean,
+            _ => Orogeny::Himalayan,
+        };
+        c.orogeny_age_my[i] = (rng.next_f64() * orogeny_age_max_my) as f32;
+        c.fold_dir[i] = v(rng);
+        c.ridge_dir[i] = v(rng);
+    }
+    c
+}

@@ -30,6 +30,8 @@
 pub mod aging;
 pub mod amplify;
 pub mod collision_uplift;
+pub mod crust_gather;
+pub mod crust_reduce;
 pub mod erosion;
 pub mod resample_interpolate;
 pub mod resample_locate;
@@ -236,6 +238,8 @@ pub struct GpuContext {
     pub(crate) locate: resample_locate::LocateKernel,
     pub(crate) collision: collision_uplift::CollisionKernel,
     pub(crate) interpolate: resample_interpolate::InterpolateKernel,
+    pub(crate) gather: crust_gather::GatherKernel,
+    pub(crate) reduce: crust_reduce::ReduceKernel,
     crust: Option<CrustBuffers>,
     crust_synced: Option<Tick>,
     device_newer: FieldMask,
@@ -362,6 +366,8 @@ impl GpuContext {
         let locate = resample_locate::LocateKernel::new(&device);
         let collision = collision_uplift::CollisionKernel::new(&device);
         let interpolate = resample_interpolate::InterpolateKernel::new(&device);
+        let gather = crust_gather::GatherKernel::new(&device);
+        let reduce = crust_reduce::ReduceKernel::new(&device);
         let ctx = Self {
             device,
             queue,
@@ -373,6 +379,8 @@ impl GpuContext {
             locate,
             collision,
             interpolate,
+            gather,
+            reduce,
             crust: None,
             crust_synced: None,
             device_newer: FieldMask::NONE,
@@ -553,6 +561,8 @@ impl GpuContext {
             self.aging.forget_bind_group();
             self.uplift.forget_bind_groups();
             self.collision.forget_bind_group();
+            self.gather.forget_bind_group();
+            self.reduce.forget_bind_group();
         }
         let Some(b) = self.crust.take() else {
             return Err(GpuError::Kernel {

@@ -577,44 +577,81 @@ pub fn build_terranes(world: &mut World) {
 /// accumulated since the last resampling.
 pub fn track_fronts(
     mesh: Res<SphereMesh>,
-    mut crust: ResMut<Crust>,
+    crust: Res<Crust>,
     params: Res<Params>,
     plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
     mut fp: ResMut<FrontPoints>,
     gpu: Option<ResMut<GpuContext>>,
 ) {
-    // On the GPU backend the elevation may be newer on the device (lazy host sync).
-    if let Some(mut gpu) = gpu {
-        crate::gpu::pull_or_record(&mut gpu, &mut crust, FieldMask::ELEVATION);
-    }
     let crust: &Crust = &crust;
     let table = PlateTable::from_query(&plates);
     let r_km = params.planet.radius_km;
     let dt = params.time.time_step_my as f32;
     let fp = &mut *fp;
-    let results: Vec<(bool, f32, DVec3, f32)> = (0..fp.len())
+    // Where each front point is: the triangle and weights under it in the subducting plate
+    // (f64, on the CPU), whether subducting crust is there, the velocities.
+    type Located = (bool, [u32; 3], [f64; 3], DVec3, f32);
+    let located: Vec<Option<Located>> = (0..fp.len())
         .into_par_iter()
         .with_min_len(256)
         .map(|k| {
             let (Some(over), Some(sub)) =
                 (table.get(fp.overriding[k]), table.get(fp.subducting[k]))
             else {
-                return (false, 0.0, DVec3::ZERO, 0.0);
+                return None;
             };
             let w = over.world_from_plate * mesh.positions[fp.sample[k] as usize];
             let loc = mesh.locate(sub.plate_from_world * w);
             let t = mesh.triangles[loc.triangle as usize];
             let active = t.iter().any(|&v| crust.plate[v as usize] == sub.id);
-            let z = (0..3)
-                .map(|i| loc.weights[i] * crust.elevation_km[t[i] as usize] as f64)
-                .sum::<f64>() as f32;
             let rel_world =
                 sub.motion.velocity_km_per_my(w, r_km) - over.motion.velocity_km_per_my(w, r_km);
             let n_world = over.world_from_plate * fp.normal[k];
             let conv = (-rel_world.dot(n_world)) as f32;
             // A front acts only while subducting crust is under it and the plates still converge.
             let active = active && conv as f64 > params.subduction.min_convergence_mm_per_yr;
-            (active, z, over.plate_from_world * rel_world, conv)
+            Some((
+                active,
+                t,
+                [loc.weights[0], loc.weights[1], loc.weights[2]],
+                over.plate_from_world * rel_world,
+                conv,
+            ))
+        })
+        .collect();
+    // The elevation at the three vertices of each located point. On the GPU backend, when the
+    // device holds the elevation newer than the host (lazy host sync), the gather kernel reads
+    // just these 3F values (raw f32, the same bits as the host array after a pull).
+    let index: Vec<u32> = located
+        .iter()
+        .flatten()
+        .flat_map(|&(_, t, _, _, _)| t)
+        .collect();
+    let mut gathered = None;
+    if let Some(mut gpu) = gpu
+        && gpu.device_newer().contains(FieldMask::ELEVATION)
+    {
+        let mut z = Vec::new();
+        if crate::gpu::run_or_record(&mut gpu, |g| {
+            z = crate::gpu::crust_gather::crust_gather_gpu(g, &index)?;
+            Ok(())
+        }) {
+            gathered = Some(z);
+        }
+    }
+    let gathered = gathered
+        .unwrap_or_else(|| crate::gpu::crust_gather::crust_gather_cpu(&crust.elevation_km, &index));
+    let mut next = 0;
+    let results: Vec<(bool, f32, DVec3, f32)> = located
+        .into_iter()
+        .map(|l| {
+            let Some((active, _, weights, rel, conv)) = l else {
+                return (false, 0.0, DVec3::ZERO, 0.0);
+            };
+            let zv = &gathered[next..next + 3];
+            next += 3;
+            let z = (0..3).map(|i| weights[i] * zv[i] as f64).sum::<f64>() as f32;
+            (active, z, rel, conv)
         })
         .collect();
     for (k, (active, z, rel, conv)) in results.into_iter().enumerate() {

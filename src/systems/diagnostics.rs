@@ -58,12 +58,20 @@ pub fn crust_stats(mesh: &SphereMesh, crust: &Crust) -> CrustStats {
 #[derive(Resource, Clone, Debug, Default, PartialEq, Eq)]
 pub struct CrustHealth(pub Option<NonFinite>);
 
+/// The fields the diagnostics reduction kernel checks on the device.
+const REDUCED: FieldMask = FieldMask(
+    FieldMask::ELEVATION.0 | FieldMask::AGE.0 | FieldMask::OROGENY_AGE.0 | FieldMask::FOLD_DIR.0,
+);
+
 /// Refreshes [`CrustStats`] and [`CrustHealth`].
 ///
-/// On the GPU backend the elevation is pulled from the device first (lazy host sync; 4 bytes a
-/// sample). The other device-written fields (ages, fold direction) are checked as of their last
-/// pull, at the latest the last resampling, until a reduction kernel does the check on the
-/// device (docs/gpu-residency.md, stage 1).
+/// On the GPU backend, when the device holds fields newer than the host (lazy host sync), the
+/// reduction kernel ([`crate::gpu::crust_reduce`]) computes the land bitmask, the elevation
+/// range and the first non-finite index of the device-written fields on the device (N/8 bytes
+/// read back instead of the elevation); the land area is summed on the host in the chunk order
+/// of [`crust_stats`], so the results are the CPU path's. Fields the host holds current
+/// (thickness, ridge direction, and any reduced field not newer on the device) are checked on
+/// the host. If the kernel fails, the error is recorded and the elevation is pulled instead.
 pub fn update_diagnostics(
     mesh: Res<SphereMesh>,
     mut crust: ResMut<Crust>,
@@ -72,15 +80,79 @@ pub fn update_diagnostics(
     mut health: ResMut<CrustHealth>,
     gpu: Option<ResMut<GpuContext>>,
 ) {
+    let mut reduced = None;
     if let Some(mut gpu) = gpu {
-        crate::gpu::pull_or_record(&mut gpu, &mut crust, FieldMask::ELEVATION);
+        let newer = gpu.device_newer().and(REDUCED);
+        if !newer.is_empty() && gpu.failure.is_none() {
+            match crate::gpu::crust_reduce::crust_reduce_gpu(&mut gpu) {
+                Ok(r) => reduced = Some((r, newer)),
+                Err(e) => {
+                    tracing::error!("{e}");
+                    gpu.failure = Some(e);
+                }
+            }
+        }
+        if reduced.is_none() {
+            crate::gpu::pull_or_record(&mut gpu, &mut crust, REDUCED);
+        }
     }
     let crust: &Crust = &crust;
-    let mut s = crust_stats(&mesh, crust);
+    let mut s;
+    match &reduced {
+        Some((r, newer)) => {
+            s = if newer.contains(FieldMask::ELEVATION) {
+                crate::gpu::crust_reduce::stats_from_reduction(&mesh, &crust.crust_type, r)
+            } else {
+                crust_stats(&mesh, crust)
+            };
+            health.0 = check_finite_with(crust, r, *newer);
+        }
+        None => {
+            s = crust_stats(&mesh, crust);
+            health.0 = crust.check_finite().err();
+        }
+    }
     s.plates = plates.iter().count();
     *stats = s;
-    health.0 = crust.check_finite().err();
     if let Some(e) = &health.0 {
         tracing::error!("{e}");
     }
+}
+
+/// `Crust::check_finite` with the fields of `newer` taken from the device reduction `r` (same
+/// field order, so the same first error).
+pub fn check_finite_with(
+    crust: &Crust,
+    r: &crate::gpu::crust_reduce::CrustReduction,
+    newer: FieldMask,
+) -> Option<NonFinite> {
+    let host = |v: &[f32]| v.iter().position(|x| !x.is_finite());
+    let host3 = |v: &[[f32; 3]]| v.iter().position(|x| !x.iter().all(|c| c.is_finite()));
+    let pick = |m: FieldMask, k: usize, h: &dyn Fn() -> Option<usize>| {
+        if newer.contains(m) {
+            r.first_non_finite[k]
+        } else {
+            h()
+        }
+    };
+    let order: [(&'static str, Option<usize>); 6] = [
+        (
+            "elevation_km",
+            pick(FieldMask::ELEVATION, 0, &|| host(&crust.elevation_km)),
+        ),
+        ("thickness_km", host(&crust.thickness_km)),
+        ("age_my", pick(FieldMask::AGE, 1, &|| host(&crust.age_my))),
+        (
+            "orogeny_age_my",
+            pick(FieldMask::OROGENY_AGE, 2, &|| host(&crust.orogeny_age_my)),
+        ),
+        ("ridge_dir", host3(&crust.ridge_dir)),
+        (
+            "fold_dir",
+            pick(FieldMask::FOLD_DIR, 3, &|| host3(&crust.fold_dir)),
+        ),
+    ];
+    order
+        .into_iter()
+        .find_map(|(field, i)| i.map(|index| NonFinite { field, index }))
 }

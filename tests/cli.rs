@@ -306,3 +306,89 @@ fn plugins_are_listed_switched_and_configured() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `planet bench` on a small planet: exits 0, times steady and resampling steps apart (their
+/// counts add up to the steps asked for), and on the GPU backend reports their traffic apart.
+#[test]
+fn bench_times_steady_and_resampling_steps_apart() {
+    let run = |backend: &str| {
+        planet()
+            .args([
+                "bench",
+                "--samples",
+                "4000",
+                "--plates",
+                "8",
+                "--steps",
+                "24",
+                "--resamplings",
+                "1",
+                "--backend",
+                backend,
+            ])
+            .env(
+                "XDG_RUNTIME_DIR",
+                std::env::temp_dir().join(format!("planet-cli-xdg-{}", std::process::id())),
+            )
+            .output()
+            .expect("run planet bench")
+    };
+    // "(a of b steps)" at the end of the line that starts with `label`.
+    let counts = |out: &str, label: &str| -> (u64, u64) {
+        let line = out
+            .lines()
+            .find(|l| l.trim_start().starts_with(label))
+            .unwrap_or_else(|| panic!("no {label:?} line in:\n{out}"));
+        let inner = line
+            .rsplit_once('(')
+            .and_then(|(_, r)| r.strip_suffix(" steps)"))
+            .unwrap_or_else(|| panic!("no step count in {line:?}"));
+        let (a, b) = inner.split_once(" of ").expect("a of b");
+        (a.parse().expect("a"), b.parse().expect("b"))
+    };
+    let _ = std::fs::create_dir_all(
+        std::env::temp_dir().join(format!("planet-cli-xdg-{}", std::process::id())),
+    );
+    let out = run("cpu");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "bench failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (steady, all) = counts(&stdout, "steady step (median)");
+    let (resampling, all2) = counts(&stdout, "resampling step (median)");
+    assert_eq!((all, all2), (24, 24), "{stdout}");
+    assert_eq!(steady + resampling, 24, "{stdout}");
+    // 24 steps of a small planet resample at least once (adaptive interval).
+    assert!(resampling >= 1, "{stdout}");
+    assert!(!stdout.contains("GPU traffic"), "{stdout}");
+
+    let out = run("gpu");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if !out.status.success() && stderr.contains("no GPU adapter") {
+        assert!(
+            !std::env::var("CI").is_ok_and(|v| v == "true"),
+            "no GPU adapter on CI: {stderr}"
+        );
+        eprintln!("skipped the GPU bench: {stderr}");
+        return;
+    }
+    assert!(out.status.success(), "GPU bench failed: {stderr}");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    for label in ["GPU traffic, steady step", "GPU traffic, resampling step"] {
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with(label))
+            .unwrap_or_else(|| panic!("no {label:?} line in:\n{stdout}"));
+        let n: u64 = line
+            .rsplit_once('(')
+            .and_then(|(_, r)| r.strip_suffix(" steps)"))
+            .and_then(|s| s.parse().ok())
+            .unwrap_or_else(|| panic!("no step count in {line:?}"));
+        assert!(n >= 1, "{stdout}");
+    }
+    let (steady_gpu, _) = counts(&stdout, "steady step (median)");
+    let (resampling_gpu, _) = counts(&stdout, "resampling step (median)");
+    assert_eq!(steady_gpu + resampling_gpu, 24, "{stdout}");
+}

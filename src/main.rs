@@ -1100,8 +1100,8 @@ fn bench(a: BenchArgs) -> Result<()> {
         "mesh + initial planet",
         build.as_secs_f64() * 1e3
     );
-    // Each step: wall time, whether it resampled, and its GPU traffic.
-    let mut steps = Vec::new();
+    // Each step: wall time, what kind of step it was, and its GPU traffic.
+    let mut steps: Vec<BenchStep> = Vec::new();
     let traffic0 = gpu_traffic(&sim);
     for _ in 0..a.steps {
         let before = (sim.clock().resamplings, gpu_traffic(&sim));
@@ -1111,7 +1111,13 @@ fn bench(a: BenchArgs) -> Result<()> {
         let after = gpu_traffic(&sim);
         steps.push(BenchStep {
             ms,
-            resampled: sim.clock().resamplings != before.0,
+            kind: if sim.clock().resamplings != before.0 {
+                StepKind::Resampling
+            } else if steps.last().is_some_and(|s| s.kind == StepKind::Resampling) {
+                StepKind::AfterResampling
+            } else {
+                StepKind::Steady
+            },
             traffic: before.1.zip(after).map(|(b, a)| {
                 (
                     a.uploaded_bytes - b.uploaded_bytes,
@@ -1142,15 +1148,15 @@ fn bench(a: BenchArgs) -> Result<()> {
         "whole step (median)",
         median(&step_ms)
     );
-    for (label, resampled) in [("steady step", false), ("resampling step", true)] {
+    for kind in StepKind::ALL {
         let ms: Vec<f64> = steps
             .iter()
-            .filter(|s| s.resampled == resampled)
+            .filter(|s| s.kind == kind)
             .map(|s| s.ms)
             .collect();
         println!(
-            "{:<28} {:>10.3} ms  ({} of {} steps)",
-            format!("  {label} (median)"),
+            "{:<30} {:>8.3} ms  ({} of {} steps)",
+            format!("  {} (median)", kind.label()),
             median(&ms),
             ms.len(),
             steps.len()
@@ -1237,20 +1243,46 @@ fn bench(a: BenchArgs) -> Result<()> {
 struct BenchStep {
     /// Wall time, ms.
     ms: f64,
-    /// Whether the step ended in a global resampling.
-    resampled: bool,
+    /// Steady, resampling, or the step right after a resampling.
+    kind: StepKind,
     /// Bytes uploaded and downloaded during the step (GPU backend only).
     traffic: Option<(u64, u64)>,
 }
 
-/// The GPU traffic of steady steps and of resampling steps apart: median and largest bytes up
-/// and down per step, and per sample. Steady steps are what residency is judged by; the step
-/// after a resampling re-uploads the crust the CPU rebuilt, which the largest figure shows.
+/// The kinds of step the bench reports apart.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum StepKind {
+    /// Neither a resampling nor the step right after one.
+    Steady,
+    /// A step that ended in a global resampling.
+    Resampling,
+    /// The step right after a resampling: on the GPU backend it uploads the crust that the CPU
+    /// rebuilt, so its traffic belongs to the resampling.
+    AfterResampling,
+}
+
+impl StepKind {
+    const ALL: [StepKind; 3] = [
+        StepKind::Steady,
+        StepKind::Resampling,
+        StepKind::AfterResampling,
+    ];
+    fn label(self) -> &'static str {
+        match self {
+            StepKind::Steady => "steady step",
+            StepKind::Resampling => "resampling step",
+            StepKind::AfterResampling => "after resampling",
+        }
+    }
+}
+
+/// The GPU traffic of each kind of step: median and largest bytes up and down per step, and per
+/// sample. Steady steps are what residency is judged by.
 fn print_step_traffic(steps: &[BenchStep], samples: usize) {
-    for (label, resampled) in [("steady step", false), ("resampling step", true)] {
+    for kind in StepKind::ALL {
         let t: Vec<(u64, u64)> = steps
             .iter()
-            .filter(|s| s.resampled == resampled)
+            .filter(|s| s.kind == kind)
             .filter_map(|s| s.traffic)
             .collect();
         if t.is_empty() {
@@ -1261,8 +1293,8 @@ fn print_step_traffic(steps: &[BenchStep], samples: usize) {
         let max = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
         let per = |b: f64| b / samples.max(1) as f64;
         println!(
-            "{:<28} {:>10.3} MB up ({:.2} B/sample), {:.3} MB down ({:.2} B/sample); largest {:.2} MB up, {:.2} MB down ({} steps)",
-            format!("GPU traffic, {label}"),
+            "{:<30} {:>8.3} MB up ({:.2} B/sample), {:.3} MB down ({:.2} B/sample); largest {:.2} MB up, {:.2} MB down ({} steps)",
+            format!("GPU traffic, {}", kind.label()),
             median(&up) / 1e6,
             per(median(&up)),
             median(&down) / 1e6,

@@ -307,8 +307,9 @@ fn plugins_are_listed_switched_and_configured() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// `planet bench` on a small planet: exits 0, times steady and resampling steps apart (their
-/// counts add up to the steps asked for), and on the GPU backend reports their traffic apart.
+/// `planet bench` on a small planet: exits 0, times steady steps, resampling steps and the steps
+/// right after a resampling apart (their counts add up to the steps asked for), and on the GPU
+/// backend reports their traffic apart.
 #[test]
 fn bench_times_steady_and_resampling_steps_apart() {
     let run = |backend: &str| {
@@ -358,8 +359,11 @@ fn bench_times_steady_and_resampling_steps_apart() {
     );
     let (steady, all) = counts(&stdout, "steady step (median)");
     let (resampling, all2) = counts(&stdout, "resampling step (median)");
-    assert_eq!((all, all2), (24, 24), "{stdout}");
-    assert_eq!(steady + resampling, 24, "{stdout}");
+    let (after, all3) = counts(&stdout, "after resampling (median)");
+    assert_eq!((all, all2, all3), (24, 24, 24), "{stdout}");
+    assert_eq!(steady + resampling + after, 24, "{stdout}");
+    // Each resampling but possibly the last is followed by a step after it.
+    assert!(after + 1 >= resampling && after <= resampling, "{stdout}");
     // 24 steps of a small planet resample at least once (adaptive interval).
     assert!(resampling >= 1, "{stdout}");
     assert!(!stdout.contains("GPU traffic"), "{stdout}");
@@ -376,7 +380,11 @@ fn bench_times_steady_and_resampling_steps_apart() {
     }
     assert!(out.status.success(), "GPU bench failed: {stderr}");
     let stdout = String::from_utf8_lossy(&out.stdout);
-    for label in ["GPU traffic, steady step", "GPU traffic, resampling step"] {
+    for label in [
+        "GPU traffic, steady step",
+        "GPU traffic, resampling step",
+        "GPU traffic, after resampling",
+    ] {
         let line = stdout
             .lines()
             .find(|l| l.starts_with(label))
@@ -390,5 +398,6 @@ fn bench_times_steady_and_resampling_steps_apart() {
     }
     let (steady_gpu, _) = counts(&stdout, "steady step (median)");
     let (resampling_gpu, _) = counts(&stdout, "resampling step (median)");
-    assert_eq!(steady_gpu + resampling_gpu, 24, "{stdout}");
+    let (after_gpu, _) = counts(&stdout, "after resampling (median)");
+    assert_eq!(steady_gpu + resampling_gpu + after_gpu, 24, "{stdout}");
 }

@@ -574,6 +574,8 @@ fn resample_locate_kernel_matches_cpu_reference() {
     // The kernel alone. Its output starts poisoned (the host vector is all ones: NaN weights,
     // gaps), so a dispatch or readback that writes nothing cannot pass.
     let cells = CellPlates::build(&mesh, crust, table);
+    // The kernels read the old crust from the resident buffers.
+    ctx.sync_crust(crust, None).expect("upload");
     let (raw, doubtful) =
         resample_locate_raw(&mut ctx, &mesh, crust, table, &rules, &cells).expect("kernel");
     let mut is_doubtful = vec![false; N];
@@ -670,6 +672,13 @@ fn resample_interpolate_kernel_matches_cpu_reference() {
     resample_interpolate_cpu(&mesh, crust, &table, &sources, &mut cpu);
     // The output starts as garbage of the wrong size: everything must come from the device.
     let mut gpu = random_crust(7, &mut rng);
+    // The kernel reads the old crust from the resident buffers: without them, an error.
+    if ctx.crust_buffers().is_none() {
+        let err = resample_interpolate_gpu(&mut ctx, &mesh, crust, &table, &sources, &mut gpu)
+            .unwrap_err();
+        assert!(err.to_string().contains("not on the device"), "{err}");
+    }
+    ctx.sync_crust(crust, None).expect("upload");
     // Bad input is an error, not a panic or an out-of-bounds read on the device.
     assert!(
         resample_interpolate_gpu(&mut ctx, &mesh, crust, &table, &sources[..5], &mut gpu).is_err()

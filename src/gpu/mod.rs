@@ -219,6 +219,13 @@ pub struct CrustBuffers {
     pub orogeny_age_my: wgpu::Buffer,
     /// Fold direction, three f32 per sample, plate frame.
     pub fold_dir: wgpu::Buffer,
+    /// Crust thickness, f32 per sample, km (no kernel writes it; the resampling reads it).
+    pub thickness_km: wgpu::Buffer,
+    /// Ridge direction, three f32 per sample, plate frame (no kernel writes it; the
+    /// resampling reads it).
+    pub ridge_dir: wgpu::Buffer,
+    /// Plate id, u32 per sample (no kernel writes it; the resampling reads it).
+    pub plate: wgpu::Buffer,
 }
 
 /// The wgpu device and everything the kernels keep on it (a resource, present only on the GPU
@@ -555,6 +562,9 @@ impl GpuContext {
                 orogeny: self.storage_buffer("crust orogeny (u8 x4)", n),
                 orogeny_age_my: self.storage_buffer("crust orogeny_age_my", 4 * n),
                 fold_dir: self.storage_buffer("crust fold_dir", 12 * n),
+                thickness_km: self.storage_buffer("crust thickness_km", 4 * n),
+                ridge_dir: self.storage_buffer("crust ridge_dir", 12 * n),
+                plate: self.storage_buffer("crust plate", 4 * n),
             };
             self.crust = Some(b);
             self.erosion.forget_bind_group();
@@ -579,6 +589,9 @@ impl GpuContext {
             bytemuck::cast_slice(&crust.orogeny_age_my),
         );
         self.upload(&b.fold_dir, bytemuck::cast_slice(&crust.fold_dir));
+        self.upload(&b.thickness_km, bytemuck::cast_slice(&crust.thickness_km));
+        self.upload(&b.ridge_dir, bytemuck::cast_slice(&crust.ridge_dir));
+        self.upload(&b.plate, bytemuck::cast_slice(&crust.plate));
         self.crust = Some(b);
         self.crust_synced = host_tick;
         self.traffic.crust_uploads += 1;
@@ -614,6 +627,13 @@ impl GpuContext {
             self.pull(crust, FieldMask::ALL)?;
         }
         Ok(())
+    }
+
+    /// Marks `fields` newer on the device (a kernel wrote them) and pulls them into `crust` at
+    /// once (tests and the kernels' `read_back` helpers; the systems leave them on the device).
+    pub fn pull_written(&mut self, fields: FieldMask, crust: &mut Crust) -> Result<(), GpuError> {
+        self.device_newer |= fields;
+        self.pull(crust, fields)
     }
 
     /// The host is authoritative again (a new crust was installed: resampling, load): forgets

@@ -11,9 +11,9 @@
 //!   (cell starts and triangle lists, about 20 bytes a sample).
 //! - **Per resampling:** the plate table in rank order (rotation plate ← world, cap centroid and
 //!   radius, id, slot: 64 bytes a plate), the override pairs, the suture targets, the locator
-//!   cells' plate lists (8 bytes a cell), the old crust's plate ids and crust types (5 bytes a
-//!   sample) and, when sutures are pending, the suture of every old sample (4 bytes a sample).
-//!   Read back: 32 bytes a sample.
+//!   cells' plate lists (8 bytes a cell) and, when sutures are pending, the suture of every old
+//!   sample (4 bytes a sample). The old crust's plate ids and crust types are the resident
+//!   crust buffers ([`crate::gpu::CrustBuffers`]). Read back: 32 bytes a sample.
 //!
 //! Precision: the GPU works in f32, the CPU in f64. Where f32 rounding could change a decision
 //! (near a triangle edge or vertex, a tie of corners, a continental weight near 1/2, a locator
@@ -208,7 +208,9 @@ fn plate_words(table: &PlateTable) -> Vec<GpuPlate> {
 
 /// Runs the kernel and reads its output back: per sample, the source as the kernel found it
 /// (gaps as [`SampleSource`] gaps), and the samples the kernel left to the CPU (their sources
-/// are gaps here). [`resample_locate_gpu`] then locates those on the CPU.
+/// are gaps here). [`resample_locate_gpu`] then locates those on the CPU. The kernel reads the
+/// old crust's plates and crust types from the resident buffers: call
+/// [`GpuContext::sync_crust`] with `old` first (`old` itself only sizes the check here).
 pub fn resample_locate_raw(
     ctx: &mut GpuContext,
     mesh: &SphereMesh,
@@ -249,12 +251,20 @@ pub fn resample_locate_raw(
     let limit = ctx.device.limits().max_storage_buffer_binding_size;
     too_large("the plate table and cell lists", 4 * aux.len(), limit)?;
     too_large("the output", 32 * n, limit)?;
+    // The old crust's plates and crust types are the resident buffers (stage 3 of
+    // docs/gpu-residency.md): nothing of the crust goes up here.
+    let Some((plate_buf, type_buf)) = ctx
+        .crust_buffers()
+        .filter(|b| b.len == n)
+        .map(|b| (b.plate.clone(), b.crust_type.clone()))
+    else {
+        return Err(GpuError::Kernel {
+            kernel: "resample_locate",
+            message: "the old crust is not on the device (call sync_crust first)".into(),
+        });
+    };
     let aux_buf = ctx.storage_buffer("locate aux", 4 * aux.len());
     ctx.upload(&aux_buf, bytemuck::cast_slice(&aux));
-    let plate_buf = ctx.storage_buffer("locate old plate", 4 * n);
-    ctx.upload(&plate_buf, bytemuck::cast_slice(&old.plate));
-    let type_buf = ctx.storage_buffer("locate crust type", n);
-    ctx.upload(&type_buf, bytemuck::cast_slice(&old.crust_type));
     let suture_buf = ctx.storage_buffer("locate sutures", 4 * rules.suture_of_sample.len());
     ctx.upload(&suture_buf, bytemuck::cast_slice(rules.suture_of_sample));
     let out_buf = ctx.storage_buffer("locate output", 32 * n);
@@ -341,7 +351,9 @@ pub fn resample_locate_raw(
 }
 
 /// The GPU counterpart of [`resample_locate_cpu`]: locates every sample on the device, then the
-/// samples the kernel left to the CPU with [`locate_one`]. Same outputs as the CPU except the
+/// samples the kernel left to the CPU with [`locate_one`] (on the host copy of `old`'s plates
+/// and crust types, which no kernel writes). The resident crust must hold `old` (call
+/// [`GpuContext::sync_crust`] first). Same outputs as the CPU except the
 /// weights (f32 geometry, see the module documentation).
 pub fn resample_locate_gpu(
     ctx: &mut GpuContext,

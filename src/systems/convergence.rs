@@ -441,42 +441,65 @@ pub fn close_trapped_ocean(world: &mut World) {
     if limit <= 0.0 {
         return;
     }
-    let mut crust = world.remove_resource::<Crust>().unwrap_or_default();
-    let mesh = world.resource::<SphereMesh>();
-    let n = mesh.len();
-    let mut seen = vec![false; n];
-    let mut comp = Vec::new();
-    for s in 0..n {
-        if seen[s] || crust.crust_type[s] != CrustType::Oceanic {
-            continue;
-        }
-        comp.clear();
-        comp.push(s);
-        seen[s] = true;
-        let (mut area, mut enclosed, mut k) = (0.0, true, 0);
-        let plate = crust.plate[s];
-        while k < comp.len() {
-            let u = comp[k];
-            k += 1;
-            area += mesh.area_km2[u];
-            for &v in mesh.neighbors_of(u) {
-                let v = v as usize;
-                if crust.crust_type[v] == CrustType::Oceanic {
-                    if !seen[v] {
-                        seen[v] = true;
-                        comp.push(v);
+    // First the trapped components (crust type and plate only, which no GPU kernel writes);
+    // filling one cannot change the test of another (components are not adjacent), so this
+    // finds the same ones as testing and filling in turn.
+    let trapped = {
+        let crust = world.resource::<Crust>();
+        let mesh = world.resource::<SphereMesh>();
+        let n = mesh.len();
+        let mut seen = vec![false; n];
+        let mut trapped: Vec<Vec<usize>> = Vec::new();
+        let mut comp = Vec::new();
+        for s in 0..n {
+            if seen[s] || crust.crust_type[s] != CrustType::Oceanic {
+                continue;
+            }
+            comp.clear();
+            comp.push(s);
+            seen[s] = true;
+            let (mut area, mut enclosed, mut k) = (0.0, true, 0);
+            let plate = crust.plate[s];
+            while k < comp.len() {
+                let u = comp[k];
+                k += 1;
+                area += mesh.area_km2[u];
+                for &v in mesh.neighbors_of(u) {
+                    let v = v as usize;
+                    if crust.crust_type[v] == CrustType::Oceanic {
+                        if !seen[v] {
+                            seen[v] = true;
+                            comp.push(v);
+                        }
+                    } else if crust.plate[v] != plate {
+                        enclosed = false;
                     }
-                } else if crust.plate[v] != plate {
+                }
+                if area >= limit {
                     enclosed = false;
                 }
             }
-            if area >= limit {
-                enclosed = false;
+            if !enclosed || area >= limit || comp.iter().any(|&u| crust.plate[u] != plate) {
+                continue;
             }
+            trapped.push(comp.clone());
         }
-        if !enclosed || area >= limit || comp.iter().any(|&u| crust.plate[u] != plate) {
-            continue;
-        }
+        trapped
+    };
+    // Nothing to weld: the crust is left untouched (its change tick does not move, so on the
+    // GPU backend the device copy, surged by the collision kernel, stays current).
+    if trapped.is_empty() {
+        return;
+    }
+    // The fill reads elevations and writes the crust: on the GPU backend every field the
+    // device holds newer comes down first.
+    if !crate::gpu::sync_crust_to_host_or_record(world, crate::gpu::FieldMask::ALL) {
+        return;
+    }
+    let thickness = world.resource::<Params>().init.continental_thickness_km as f32;
+    let mut crust = world.remove_resource::<Crust>().unwrap_or_default();
+    let mesh = world.resource::<SphereMesh>();
+    for comp in &trapped {
         // Fill from the shore inward with the mean elevation of continental neighbours.
         let mut remaining: Vec<usize> = comp.clone();
         while !remaining.is_empty() {
@@ -502,8 +525,7 @@ pub fn close_trapped_ocean(world: &mut World) {
             for (u, z) in filled {
                 crust.elevation_km[u] = z;
                 crust.crust_type[u] = CrustType::Continental;
-                crust.thickness_km[u] =
-                    world.resource::<Params>().init.continental_thickness_km as f32;
+                crust.thickness_km[u] = thickness;
             }
             remaining = next;
         }
@@ -1102,10 +1124,12 @@ pub fn collision_uplift(world: &mut World) {
     }
     let mut synced = false;
     if let Some(g) = gpu.as_mut().filter(|_| !surges.is_empty()) {
+        // The surged fields stay on the device (lazy host sync, stage 3 of
+        // docs/gpu-residency.md): the CPU systems that follow pull what they read.
         let done = run_or_record(g, |g| {
             g.sync_crust(&crust, crust_tick)?;
             crate::gpu::collision_uplift::collision_uplift_gpu(g, &mesh.positions, &surges)?;
-            crate::gpu::collision_uplift::read_back(g, &mut crust)
+            g.note_device_write(crate::gpu::collision_uplift::WRITES, &mut crust)
         });
         synced = done;
         if !done {

@@ -19,12 +19,13 @@ use tectonic_planets::gpu::crust_reduce::{
 };
 use tectonic_planets::gpu::erosion::{ErosionRates, erosion_cpu, erosion_dispatch};
 use tectonic_planets::gpu::resample_interpolate::{
-    resample_interpolate_cpu, resample_interpolate_gpu,
+    resample_interpolate_cpu, resample_interpolate_gpu, resample_interpolate_gpu_located,
 };
 use tectonic_planets::gpu::resample_locate::{
     CellPlates, OverlapRules, SampleSource, resample_locate_cpu, resample_locate_gpu,
     resample_locate_raw,
 };
+use tectonic_planets::gpu::sources_patch::{sources_patch_cpu, sources_patch_gpu};
 use tectonic_planets::gpu::subduction_uplift::{
     UpliftConstants, read_back, subduction_uplift_cpu, subduction_uplift_dispatch,
 };
@@ -634,6 +635,21 @@ fn resample_locate_kernel_matches_cpu_reference() {
         gaps,
         "seed {seed}: gaps differ"
     );
+    // Stage 3b: the interpolation kernel reading the sources left on the device (the
+    // rechecked ones written back by sources_patch) gives the same bits as with the host's
+    // sources uploaded.
+    let (mut from_host, mut from_device) = (Crust::default(), Crust::default());
+    resample_interpolate_gpu(&mut ctx, &mesh, crust, table, &gpu, &mut from_host)
+        .expect("interpolate, host sources");
+    resample_interpolate_gpu_located(&mut ctx, &mesh, crust, table, &gpu, &mut from_device)
+        .expect("interpolate, device sources");
+    assert_eq!(
+        from_host.hash(),
+        from_device.hash(),
+        "seed {seed}: sources on the device differ from the host's ({} rechecked)",
+        report.rechecked
+    );
+    assert!(report.rechecked > 0, "seed {seed}: nothing rechecked");
     let (mut next_cpu, mut next_gpu) = (Crust::default(), Crust::default());
     interpolate(&mesh, crust, table, &cpu, &mut next_cpu);
     interpolate(&mesh, crust, table, &gpu, &mut next_gpu);
@@ -1205,4 +1221,42 @@ fn crust_reduce_kernel_matches_crust_stats_and_check_finite() {
             );
         }
     }
+}
+
+#[test]
+fn sources_patch_kernel_matches_cpu_reference_bit_for_bit() {
+    let Some(mut ctx) = gpu_or_skip("sources patch") else {
+        return;
+    };
+    let seed = fresh_seed("GPU_TEST_SEED");
+    let mut rng = SimRng::new(seed, 12);
+    let word = |rng: &mut SimRng| (rng.next_f64() * 4_294_967_296.0) as u32;
+    let mut words: Vec<[u32; 8]> = (0..N)
+        .map(|_| std::array::from_fn(|_| word(&mut rng)))
+        .collect();
+    words[3][5] = 0x7fc0_1234; // a NaN payload stays as it is
+    let target = ctx.storage_buffer("test sources", 32 * N);
+    ctx.upload(&target, bytemuck::cast_slice(&words));
+    // About 2% of the samples, distinct, in random order, with the first and the last.
+    let mut index: Vec<u32> = (0..N as u32).filter(|_| rng.next_f64() < 0.02).collect();
+    index.extend([0, N as u32 - 1]);
+    index.sort_unstable();
+    index.dedup();
+    for k in (1..index.len()).rev() {
+        let j = (rng.next_f64() * (k + 1) as f64) as usize % (k + 1);
+        index.swap(k, j);
+    }
+    let patches: Vec<(u32, [u32; 8])> = index
+        .iter()
+        .map(|&j| (j, std::array::from_fn(|_| word(&mut rng))))
+        .collect();
+    sources_patch_gpu(&mut ctx, &target, N, &patches).expect("patch");
+    let mut gpu = vec![[0u32; 8]; N];
+    ctx.download("test", &target, bytemuck::cast_slice_mut(&mut gpu))
+        .expect("download");
+    sources_patch_cpu(&mut words, &patches);
+    for j in 0..N {
+        assert_eq!(gpu[j], words[j], "seed {seed}: sample {j}");
+    }
+    assert!(sources_patch_gpu(&mut ctx, &target, N, &[(N as u32, [0; 8])]).is_err());
 }

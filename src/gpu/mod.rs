@@ -35,6 +35,7 @@ pub mod crust_reduce;
 pub mod erosion;
 pub mod resample_interpolate;
 pub mod resample_locate;
+pub mod sources_patch;
 pub mod subduction_uplift;
 
 use std::sync::{Arc, Mutex};
@@ -247,6 +248,7 @@ pub struct GpuContext {
     pub(crate) interpolate: resample_interpolate::InterpolateKernel,
     pub(crate) gather: crust_gather::GatherKernel,
     pub(crate) reduce: crust_reduce::ReduceKernel,
+    pub(crate) patch: sources_patch::PatchKernel,
     crust: Option<CrustBuffers>,
     crust_synced: Option<Tick>,
     device_newer: FieldMask,
@@ -375,6 +377,7 @@ impl GpuContext {
         let interpolate = resample_interpolate::InterpolateKernel::new(&device);
         let gather = crust_gather::GatherKernel::new(&device);
         let reduce = crust_reduce::ReduceKernel::new(&device);
+        let patch = sources_patch::PatchKernel::new(&device);
         let ctx = Self {
             device,
             queue,
@@ -388,6 +391,7 @@ impl GpuContext {
             interpolate,
             gather,
             reduce,
+            patch,
             crust: None,
             crust_synced: None,
             device_newer: FieldMask::NONE,

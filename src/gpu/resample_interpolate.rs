@@ -112,6 +112,33 @@ pub fn resample_interpolate_gpu(
     sources: &[SampleSource],
     next: &mut Crust,
 ) -> Result<(), GpuError> {
+    interpolate_with(ctx, mesh, old, table, sources, false, next)
+}
+
+/// [`resample_interpolate_gpu`] reading the sources from the device: `sources` must be the ones
+/// the last [`crate::gpu::resample_locate::resample_locate_gpu`] returned, whose output (with
+/// the rechecked samples written back) is still on the device; only the checks read the host
+/// copy. Nothing of the sources goes up. An error if the device holds no complete location.
+pub fn resample_interpolate_gpu_located(
+    ctx: &mut GpuContext,
+    mesh: &SphereMesh,
+    old: &Crust,
+    table: &PlateTable,
+    sources: &[SampleSource],
+    next: &mut Crust,
+) -> Result<(), GpuError> {
+    interpolate_with(ctx, mesh, old, table, sources, true, next)
+}
+
+fn interpolate_with(
+    ctx: &mut GpuContext,
+    mesh: &SphereMesh,
+    old: &Crust,
+    table: &PlateTable,
+    sources: &[SampleSource],
+    located: bool,
+    next: &mut Crust,
+) -> Result<(), GpuError> {
     let n = mesh.len();
     if old.len() != n || sources.len() != n {
         return Err(fail(format!(
@@ -217,23 +244,24 @@ pub fn resample_interpolate_gpu(
         ctx.queue.submit([enc.finish()]);
     }
     ctx.check(KERNEL)?;
-    let source_words: Vec<u32> = sources
-        .iter()
-        .flat_map(|s| {
-            [
-                s.slot,
-                s.plate,
-                s.suture,
-                u32::from(s.continental_lost),
-                s.triangle,
-                s.weights[0].to_bits(),
-                s.weights[1].to_bits(),
-                s.weights[2].to_bits(),
-            ]
-        })
-        .collect();
-    let src_buf = ctx.storage_buffer("resample_interpolate sources", 4 * source_words.len());
-    ctx.upload(&src_buf, bytemuck::cast_slice(&source_words));
+    let src_buf = if located {
+        match ctx.locate.located_output(n) {
+            Some(b) => b,
+            None => {
+                return Err(fail(
+                    "no complete location of this size on the device".into(),
+                ));
+            }
+        }
+    } else {
+        let source_words: Vec<u32> = sources
+            .iter()
+            .flat_map(crate::gpu::sources_patch::source_words)
+            .collect();
+        let buf = ctx.storage_buffer("resample_interpolate sources", 4 * source_words.len());
+        ctx.upload(&buf, bytemuck::cast_slice(&source_words));
+        buf
+    };
     let plate_buf = ctx.storage_buffer("resample_interpolate plates", 4 * plate_words.len());
     ctx.upload(&plate_buf, bytemuck::cast_slice(&plate_words));
     let next_buf = ctx.storage_buffer("resample_interpolate next crust", 4 * old_words);

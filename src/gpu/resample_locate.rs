@@ -13,7 +13,11 @@
 //!   radius, id, slot: 64 bytes a plate), the override pairs, the suture targets, the locator
 //!   cells' plate lists (8 bytes a cell) and, when sutures are pending, the suture of every old
 //!   sample (4 bytes a sample). The old crust's plate ids and crust types are the resident
-//!   crust buffers ([`crate::gpu::CrustBuffers`]). Read back: 32 bytes a sample.
+//!   crust buffers ([`crate::gpu::CrustBuffers`]). Read back: 32 bytes a sample (the CPU needs
+//!   every source: gaps, sutures, lost continents). The output also stays on the device, and
+//!   the sources the host rechecks are written into it ([`crate::gpu::sources_patch`], 36 bytes
+//!   each), so the interpolation reads the sources there
+//!   ([`crate::gpu::resample_interpolate::resample_interpolate_gpu_located`]).
 //!
 //! Precision: the GPU works in f32, the CPU in f64. Where f32 rounding could change a decision
 //! (near a triangle edge or vertex, a tie of corners, a continental weight near 1/2, a locator
@@ -103,6 +107,11 @@ pub(crate) struct LocateKernel {
     pipeline: wgpu::ComputePipeline,
     uniforms: wgpu::Buffer,
     mesh: Option<MeshBuffers>,
+    /// The last location's output on the device (8 words a sample) and its sample count.
+    located: Option<(wgpu::Buffer, usize)>,
+    /// True when `located` holds, for every sample, the source [`resample_locate_gpu`]
+    /// returned (the rechecked samples written back): the interpolation may read it there.
+    located_complete: bool,
 }
 
 impl LocateKernel {
@@ -115,7 +124,20 @@ impl LocateKernel {
                 std::mem::size_of::<LocateUniforms>(),
             ),
             mesh: None,
+            located: None,
+            located_complete: false,
         }
+    }
+}
+
+impl LocateKernel {
+    /// The last location's output on the device when it is complete (see `located_complete`)
+    /// and has `n` samples.
+    pub(crate) fn located_output(&self, n: usize) -> Option<wgpu::Buffer> {
+        self.located
+            .as_ref()
+            .filter(|(_, len)| self.located_complete && *len == n)
+            .map(|(b, _)| b.clone())
     }
 }
 
@@ -236,6 +258,7 @@ pub fn resample_locate_raw(
             message: "more sutured samples than samples".into(),
         });
     }
+    ctx.locate.located_complete = false;
     ensure_mesh(ctx, mesh)?;
     // The auxiliary buffer: plates, pairs, suture targets, cell lists.
     let plates = plate_words(table);
@@ -267,7 +290,17 @@ pub fn resample_locate_raw(
     ctx.upload(&aux_buf, bytemuck::cast_slice(&aux));
     let suture_buf = ctx.storage_buffer("locate sutures", 4 * rules.suture_of_sample.len());
     ctx.upload(&suture_buf, bytemuck::cast_slice(rules.suture_of_sample));
-    let out_buf = ctx.storage_buffer("locate output", 32 * n);
+    // The output stays on the device for the interpolation (one buffer per mesh size).
+    if ctx.locate.located.as_ref().is_none_or(|(_, len)| *len != n) {
+        let buf = ctx.storage_buffer("locate output", 32 * n);
+        ctx.locate.located = Some((buf, n));
+    }
+    let Some(out_buf) = ctx.locate.located.as_ref().map(|(b, _)| b.clone()) else {
+        return Err(GpuError::Kernel {
+            kernel: "resample_locate",
+            message: "no output buffer".into(),
+        });
+    };
     let Some(m) = ctx.locate.mesh.as_ref() else {
         return Err(GpuError::Kernel {
             kernel: "resample_locate",
@@ -380,6 +413,17 @@ pub fn resample_locate_gpu(
             )
         })
         .collect();
+    // The rechecked sources go into the kernel's output on the device as well (36 bytes each),
+    // so the interpolation reads every source there (stage 3b of docs/gpu-residency.md).
+    let patches: Vec<(u32, [u32; 8])> = doubtful
+        .iter()
+        .zip(&redone)
+        .map(|(&j, s)| (j, crate::gpu::sources_patch::source_words(s)))
+        .collect();
+    if let Some((buf, _)) = ctx.locate.located.clone() {
+        crate::gpu::sources_patch::sources_patch_gpu(ctx, &buf, mesh.len(), &patches)?;
+        ctx.locate.located_complete = true;
+    }
     for (&j, s) in doubtful.iter().zip(redone) {
         sources[j as usize] = s;
     }

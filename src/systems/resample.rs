@@ -1009,14 +1009,14 @@ pub fn resample_interpolate(
     let interpolated_on_gpu = gpu.as_mut().is_some_and(|g| {
         run_or_record(g, |g| {
             g.sync_crust(crust, Some(tick))?;
-            crate::gpu::resample_interpolate::resample_interpolate_gpu(
-                g,
-                &mesh,
-                crust,
-                &table,
-                &work.sources,
-                &mut work.next,
-            )
+            // Located on the device: the sources are read there (only the rechecked ones went
+            // up again); otherwise they go up.
+            let interpolate = if on_gpu {
+                crate::gpu::resample_interpolate::resample_interpolate_gpu_located
+            } else {
+                crate::gpu::resample_interpolate::resample_interpolate_gpu
+            };
+            interpolate(g, &mesh, crust, &table, &work.sources, &mut work.next)
         })
     });
     if !interpolated_on_gpu {

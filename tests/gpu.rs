@@ -1260,3 +1260,143 @@ fn sources_patch_kernel_matches_cpu_reference_bit_for_bit() {
     }
     assert!(sources_patch_gpu(&mut ctx, &target, N, &[(N as u32, [0; 8])]).is_err());
 }
+
+#[test]
+fn a_resampling_gpu_step_moves_no_old_crust_over_the_bus() {
+    if gpu_or_skip("resampling-step traffic").is_none() {
+        return;
+    }
+    let n = 20_000u64;
+    let mut sim = gpu_sim(n, 9, false);
+    // The first resampling uploads the kernels' per-run mesh data (positions, triangles,
+    // locator cells: about 100 B/sample, once); measure the ones after it.
+    sim.request_resample();
+    sim.step().expect("first step");
+    assert_eq!(sim.clock().resamplings, 1);
+    let mut measured = Vec::new();
+    for k in 0..16 {
+        // A resampling every other step (asked for), so both kinds of step come.
+        if k % 2 == 0 {
+            sim.request_resample();
+        }
+        let before = sim.world().resource::<GpuContext>().traffic;
+        let (resamplings, since) = (sim.clock().resamplings, sim.clock().steps_since_resample);
+        sim.step().expect("step");
+        let after = sim.world().resource::<GpuContext>().traffic;
+        if sim.clock().resamplings == resamplings {
+            continue;
+        }
+        let up = after.uploaded_bytes - before.uploaded_bytes;
+        let down = after.downloaded_bytes - before.downloaded_bytes;
+        let full = after.crust_uploads - before.crust_uploads;
+        let surges = after.collision_surges - before.collision_surges;
+        let per = |b: u64| b as f64 / n as f64;
+        // Up, besides the full crust uploads (46 B/sample each: the crust a CPU system wrote,
+        // or the new crust for the collision kernel) and the distances of each collision surge
+        // (4 B/sample): the convergence field in the step after a resampling (16 B), the
+        // suture of each old sample when sutures are pending (4 B), the declared writes of a
+        // rift (plate ids, 4 B) and of close_trapped_ocean (9 B), the front table, the plate
+        // table and locator cell lists, the rechecked sources (36 B each, ~1.5%). Before stage
+        // 3 the old crust also went up for the interpolation (46 B), its plates and crust types
+        // for the location (5 B) and every source (32 B).
+        let other_up = up.saturating_sub(46 * n * full + 4 * n * surges);
+        let up_bound = 16 * n + if since == 0 { 16 * n } else { 0 } + 4 * n + 13 * n;
+        // Down: the located sources (32 B) and the new crust (46 B), the reduction and the
+        // front gather (~1 B at 20k), and, after a collision, the elevation when
+        // close_trapped_ocean welds a sliver (4 B). Before stage 3 the stale fields were pulled
+        // before the resampling too (25 B), and the collision kernel's fields at once (21 B).
+        let bound = 80 * n + if surges > 0 { 4 * n } else { 0 };
+        measured.push((per(other_up), per(down), full, surges, since));
+        // At most one full upload: the old crust if a CPU system wrote it undeclared, or the
+        // new crust for the collision kernel (before stage 3 the collision's readback and
+        // close_trapped_ocean's write made the next step upload it again).
+        assert!(full <= 1, "{full} full crust uploads in a resampling step");
+        assert!(
+            down <= bound,
+            "{:.1} B/sample down in a resampling step ({surges} surges)",
+            per(down)
+        );
+        assert!(
+            other_up <= up_bound,
+            "{:.1} B/sample up in a resampling step besides {full} full crust uploads and \
+             {surges} surges",
+            per(other_up)
+        );
+    }
+    eprintln!(
+        "resampling steps (other up B/sample, down B/sample, full crust uploads, surges, steps \
+         since the last resampling): {measured:?}"
+    );
+    assert!(measured.len() >= 5, "{measured:?}");
+}
+
+#[test]
+fn a_declared_host_write_uploads_only_its_fields() {
+    use bevy_ecs::change_detection::DetectChanges;
+    use tectonic_planets::gpu::write_crust_fields;
+    let Some(mut ctx) = gpu_or_skip("declared host write") else {
+        return;
+    };
+    let seed = fresh_seed("GPU_TEST_SEED");
+    let mut rng = SimRng::new(seed, 13);
+    let crust = random_crust(N, &mut rng);
+    let mut world = World::new();
+    world.insert_resource(crust);
+    let tick = world.resource_ref::<Crust>().last_changed();
+    ctx.sync_crust(world.resource::<Crust>(), Some(tick))
+        .expect("upload");
+    // A "kernel" raises sample 3 on the device only: the device holds the elevation newer.
+    let b = ctx.crust_buffers().expect("buffers").elevation_km.clone();
+    let mut z = world.resource::<Crust>().elevation_km.clone();
+    z[3] = 7.25;
+    ctx.upload(&b, bytemuck::cast_slice(&z));
+    let mut scratch = world.resource::<Crust>().clone();
+    ctx.note_device_write(FieldMask::ELEVATION, &mut scratch)
+        .expect("note");
+    world.insert_resource(ctx);
+    // Re-inserting the context must not count as a crust write.
+    let before = world.resource::<GpuContext>().traffic;
+    // Each write as from a later system (a schedule advances the change tick per system).
+    world.increment_change_tick();
+    write_crust_fields(&mut world, FieldMask::PLATE, |c| c.plate[5] = 77).expect("write");
+    let after = world.resource::<GpuContext>().traffic;
+    // Only the plate ids went up (4 B/sample), nothing came down, no full upload; the device
+    // still holds the elevation newer, and the next kernel's sync uploads nothing.
+    assert_eq!(after.uploaded_bytes - before.uploaded_bytes, 4 * N as u64);
+    assert_eq!(after.downloaded_bytes, before.downloaded_bytes);
+    assert_eq!(after.crust_uploads, before.crust_uploads);
+    let tick = world.resource_ref::<Crust>().last_changed();
+    world.resource_scope(|world, mut g: Mut<GpuContext>| {
+        assert_eq!(g.device_newer(), FieldMask::ELEVATION);
+        assert_ne!(world.resource::<Crust>().elevation_km[3], 7.25);
+        g.sync_crust(world.resource::<Crust>(), Some(tick))
+            .expect("in sync");
+        assert_eq!(g.traffic.crust_uploads, before.crust_uploads);
+        let pb = g.crust_buffers().expect("buffers").plate.clone();
+        let mut plate = vec![0u32; N];
+        g.download("test", &pb, bytemuck::cast_slice_mut(&mut plate))
+            .expect("download");
+        assert_eq!(plate, world.resource::<Crust>().plate);
+        assert_eq!(plate[5], 77);
+        let mut z = vec![0f32; N];
+        g.download("test", &b, bytemuck::cast_slice_mut(&mut z))
+            .expect("download");
+        assert_eq!(z[3], 7.25, "the device's elevation was lost");
+    });
+    // A write of a field the device holds newer cannot be declared: every stale field comes
+    // down first, and the next sync uploads the whole crust.
+    world.increment_change_tick();
+    write_crust_fields(&mut world, FieldMask::ELEVATION, |c| {
+        c.elevation_km[4] = 1.5
+    })
+    .expect("write");
+    assert_eq!(world.resource::<Crust>().elevation_km[3], 7.25);
+    let tick = world.resource_ref::<Crust>().last_changed();
+    world.resource_scope(|world, mut g: Mut<GpuContext>| {
+        assert!(g.device_newer().is_empty());
+        let uploads = g.traffic.crust_uploads;
+        g.sync_crust(world.resource::<Crust>(), Some(tick))
+            .expect("upload");
+        assert_eq!(g.traffic.crust_uploads, uploads + 1);
+    });
+}

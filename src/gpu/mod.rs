@@ -137,9 +137,10 @@ pub enum GpuError {
 }
 
 /// A set of the resident crust fields (bits), used to record which ones the device holds newer
-/// than the host [`Crust`].
+/// than the host [`Crust`] (the first five bits, [`FieldMask::ALL`]) and which ones a host
+/// writer declares ([`write_crust_fields`], any bit).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub struct FieldMask(pub u8);
+pub struct FieldMask(pub u16);
 
 impl FieldMask {
     /// No field.
@@ -156,6 +157,16 @@ impl FieldMask {
     pub const FOLD_DIR: Self = Self(16);
     /// Every field a kernel writes (crust type is never written on the device).
     pub const ALL: Self = Self(31);
+    /// Crust thickness (no kernel writes it).
+    pub const THICKNESS: Self = Self(32);
+    /// Ridge direction (no kernel writes it).
+    pub const RIDGE_DIR: Self = Self(64);
+    /// Plate id (no kernel writes it).
+    pub const PLATE: Self = Self(128);
+    /// Crust type (no kernel writes it).
+    pub const CRUST_TYPE: Self = Self(256);
+    /// Every resident field.
+    pub const EVERY_FIELD: Self = Self(511);
     /// True when no bit is set.
     pub fn is_empty(self) -> bool {
         self.0 == 0
@@ -640,6 +651,80 @@ impl GpuContext {
         self.pull(crust, fields)
     }
 
+    /// Whether a host write of `fields` into a crust of `len` samples whose change tick is
+    /// `before` can be declared (see [`write_crust_fields`]): the device copy is in sync with
+    /// the host as of `before` and holds none of `fields` newer.
+    pub fn can_declare_host_write(&self, fields: FieldMask, len: usize, before: Tick) -> bool {
+        self.crust_synced == Some(before)
+            && self.crust.as_ref().is_some_and(|b| b.len == len)
+            && self.device_newer.and(fields).is_empty()
+    }
+
+    /// After a declared host write (see [`Self::can_declare_host_write`]): uploads the fields of
+    /// `fields` of `crust` whole and records the device in sync with the host change tick
+    /// `after` (the tick the write moved the crust to). The other fields were not written, so
+    /// the device's copies (newer or not) stay as they are.
+    pub fn note_host_write(
+        &mut self,
+        crust: &Crust,
+        fields: FieldMask,
+        after: Tick,
+    ) -> Result<(), GpuError> {
+        let Some(b) = self.crust.take() else {
+            return Err(GpuError::Kernel {
+                kernel: "crust field upload",
+                message: "no crust buffers".into(),
+            });
+        };
+        if b.len != crust.len() || !self.device_newer.and(fields).is_empty() {
+            let message = format!(
+                "declared write of {fields:?}: host {} samples, device {}, device newer {:?}",
+                crust.len(),
+                b.len,
+                self.device_newer
+            );
+            self.crust = Some(b);
+            return Err(GpuError::Kernel {
+                kernel: "crust field upload",
+                message,
+            });
+        }
+        let has = |f: FieldMask| fields.and(f) == f;
+        if has(FieldMask::ELEVATION) {
+            self.upload(&b.elevation_km, bytemuck::cast_slice(&crust.elevation_km));
+        }
+        if has(FieldMask::AGE) {
+            self.upload(&b.age_my, bytemuck::cast_slice(&crust.age_my));
+        }
+        if has(FieldMask::OROGENY) {
+            self.upload(&b.orogeny, bytemuck::cast_slice(&crust.orogeny));
+        }
+        if has(FieldMask::OROGENY_AGE) {
+            self.upload(
+                &b.orogeny_age_my,
+                bytemuck::cast_slice(&crust.orogeny_age_my),
+            );
+        }
+        if has(FieldMask::FOLD_DIR) {
+            self.upload(&b.fold_dir, bytemuck::cast_slice(&crust.fold_dir));
+        }
+        if has(FieldMask::THICKNESS) {
+            self.upload(&b.thickness_km, bytemuck::cast_slice(&crust.thickness_km));
+        }
+        if has(FieldMask::RIDGE_DIR) {
+            self.upload(&b.ridge_dir, bytemuck::cast_slice(&crust.ridge_dir));
+        }
+        if has(FieldMask::PLATE) {
+            self.upload(&b.plate, bytemuck::cast_slice(&crust.plate));
+        }
+        if has(FieldMask::CRUST_TYPE) {
+            self.upload(&b.crust_type, bytemuck::cast_slice(&crust.crust_type));
+        }
+        self.crust = Some(b);
+        self.crust_synced = Some(after);
+        self.check("crust field upload")
+    }
+
     /// The host is authoritative again (a new crust was installed: resampling, load): forgets
     /// which fields the device held newer.
     pub fn supersede_device(&mut self) {
@@ -758,6 +843,66 @@ pub fn sync_crust_to_host(world: &mut World, mask: FieldMask) -> Result<(), GpuE
             None => Ok(()),
         }
     })
+}
+
+/// Writes the host [`Crust`] with `write`, which must change only the fields of `fields`; on the
+/// GPU backend keeps the device copy current without a full upload when it can. If the device
+/// was in sync with the host before the write and holds none of `fields` newer, `write` runs
+/// on the host copy as it is (fields the device holds newer stay stale there and on the device)
+/// and only `fields` go up afterwards ([`GpuContext::note_host_write`]; 4 B/sample for the
+/// plate ids). Otherwise every stale field is pulled first and the next kernel uploads the
+/// whole crust, as for any other host write. The crust's change tick moves as usual. A `write`
+/// that changes a field outside `fields` leaves the device with old data there: declare every
+/// field written.
+pub fn write_crust_fields(
+    world: &mut World,
+    fields: FieldMask,
+    write: impl FnOnce(&mut Crust),
+) -> Result<(), GpuError> {
+    let Some((before, len)) = world
+        .get_resource_ref::<Crust>()
+        .map(|c| (c.last_changed(), c.len()))
+    else {
+        return Ok(());
+    };
+    let declared = world
+        .get_resource::<GpuContext>()
+        .is_some_and(|g| g.failure.is_none() && g.can_declare_host_write(fields, len, before));
+    if !declared {
+        sync_crust_to_host(world, FieldMask::ALL)?;
+    }
+    let after = {
+        let mut crust = world.resource_mut::<Crust>();
+        write(&mut crust);
+        crust.last_changed()
+    };
+    if !declared {
+        return Ok(());
+    }
+    world.resource_scope(|world, mut gpu: Mut<GpuContext>| {
+        gpu.note_host_write(world.resource::<Crust>(), fields, after)
+    })
+}
+
+/// [`write_crust_fields`] from an exclusive system: on failure records the error in the context
+/// (the step then stops with it) and returns false (`write` may not have run).
+pub fn write_crust_fields_or_record(
+    world: &mut World,
+    fields: FieldMask,
+    write: impl FnOnce(&mut Crust),
+) -> bool {
+    match write_crust_fields(world, fields, write) {
+        Ok(()) => true,
+        Err(e) => {
+            tracing::error!("{e}");
+            if let Some(mut g) = world.get_resource_mut::<GpuContext>()
+                && g.failure.is_none()
+            {
+                g.failure = Some(e);
+            }
+            false
+        }
+    }
 }
 
 /// [`sync_crust_to_host`] from an exclusive system: on failure records the error in the context

@@ -491,46 +491,65 @@ pub fn close_trapped_ocean(world: &mut World) {
     if trapped.is_empty() {
         return;
     }
-    // The fill reads elevations and writes the crust: on the GPU backend every field the
-    // device holds newer comes down first.
-    if !crate::gpu::sync_crust_to_host_or_record(world, crate::gpu::FieldMask::ALL) {
+    // The fill reads elevations: on the GPU backend the elevation comes down first (the
+    // collision kernel may have raised it). The fill runs on copies of the elevation and crust
+    // type (later rings read the samples filled before them), then the written samples go into
+    // the crust as a declared write of elevation, crust type and thickness (on the GPU backend
+    // those three fields go up, 9 B/sample, instead of a pull of every field and a full upload).
+    if !crate::gpu::sync_crust_to_host_or_record(world, crate::gpu::FieldMask::ELEVATION) {
         return;
     }
     let thickness = world.resource::<Params>().init.continental_thickness_km as f32;
-    let mut crust = world.remove_resource::<Crust>().unwrap_or_default();
-    let mesh = world.resource::<SphereMesh>();
-    for comp in &trapped {
-        // Fill from the shore inward with the mean elevation of continental neighbours.
-        let mut remaining: Vec<usize> = comp.clone();
-        while !remaining.is_empty() {
-            let mut next = Vec::new();
-            let mut filled = Vec::new();
-            for &u in &remaining {
-                let (mut sum, mut cnt) = (0.0f64, 0u32);
-                for &v in mesh.neighbors_of(u) {
-                    if crust.crust_type[v as usize] == CrustType::Continental {
-                        sum += crust.elevation_km[v as usize] as f64;
-                        cnt += 1;
+    let mut writes: Vec<(usize, f32)> = Vec::new();
+    {
+        let crust = world.resource::<Crust>();
+        let mesh = world.resource::<SphereMesh>();
+        let mut elevation = crust.elevation_km.clone();
+        let mut crust_type = crust.crust_type.clone();
+        for comp in &trapped {
+            // Fill from the shore inward with the mean elevation of continental neighbours.
+            let mut remaining: Vec<usize> = comp.clone();
+            while !remaining.is_empty() {
+                let mut next = Vec::new();
+                let mut filled = Vec::new();
+                for &u in &remaining {
+                    let (mut sum, mut cnt) = (0.0f64, 0u32);
+                    for &v in mesh.neighbors_of(u) {
+                        if crust_type[v as usize] == CrustType::Continental {
+                            sum += elevation[v as usize] as f64;
+                            cnt += 1;
+                        }
+                    }
+                    if cnt > 0 {
+                        filled.push((u, (sum / cnt as f64) as f32));
+                    } else {
+                        next.push(u);
                     }
                 }
-                if cnt > 0 {
-                    filled.push((u, (sum / cnt as f64) as f32));
-                } else {
-                    next.push(u);
+                if filled.is_empty() {
+                    break;
                 }
+                for (u, z) in filled {
+                    elevation[u] = z;
+                    crust_type[u] = CrustType::Continental;
+                    writes.push((u, z));
+                }
+                remaining = next;
             }
-            if filled.is_empty() {
-                break;
-            }
-            for (u, z) in filled {
+        }
+    }
+    use crate::gpu::FieldMask;
+    crate::gpu::write_crust_fields_or_record(
+        world,
+        FieldMask::ELEVATION | FieldMask::CRUST_TYPE | FieldMask::THICKNESS,
+        |crust| {
+            for &(u, z) in &writes {
                 crust.elevation_km[u] = z;
                 crust.crust_type[u] = CrustType::Continental;
                 crust.thickness_km[u] = thickness;
             }
-            remaining = next;
-        }
-    }
-    world.insert_resource(crust);
+        },
+    );
 }
 
 /// Rebuilds the terranes: connected continental regions within each plate, as entities and as

@@ -4,26 +4,30 @@
 //! (`shaders/<kernel>.wgsl`), each with its CPU reference `<kernel>_cpu`.
 //!
 //! What stays on the device, and when it is synced (the crust is also read by CPU systems every
-//! step — fronts, collisions, terranes, diagnostics, resampling — so it cannot live only there):
-//! - The crust fields the kernels touch (elevation, crust type, age, orogeny, orogeny age, fold
-//!   direction) are device buffers kept between steps. A kernel uploads them only when the host
-//!   [`Crust`] changed since the last sync (bevy change ticks): after a resampling, a collision,
-//!   a load, or any CPU system that wrote the crust. In a step without such a change nothing of
-//!   the crust goes up.
-//! - After each kernel, the fields it wrote are read back into the host [`Crust`] (CPU systems
-//!   later in the step and the next step read them), and the device copy is marked in sync.
+//! step — fronts, collisions, terranes, diagnostics, resampling — so it cannot live only there;
+//! docs/gpu.md and docs/gpu-residency.md have the details and the measured bytes):
+//! - The whole crust (46 bytes a sample, [`CrustBuffers`]) is kept in device buffers between
+//!   steps. It goes up in full only when the host [`Crust`] changed since the last sync (bevy
+//!   change ticks): after a resampling, a load, or a CPU system that wrote the crust undeclared.
+//!   A writer that declares the fields it changes ([`write_crust_fields`]) uploads only those.
+//! - Kernels do not read back what they write: they mark the fields newer on the device
+//!   ([`GpuContext::device_newer`]), and CPU readers pull the fields they need
+//!   ([`GpuContext::pull`], [`sync_crust_to_host`], [`pull_or_record`]) without moving the
+//!   crust's change tick. The fronts gather their few elevations ([`crust_gather`]) and the
+//!   diagnostics reduce on the device ([`crust_reduce`]).
 //! - The convergence field (distances to the fronts) goes up once per resampling; per step only
 //!   the front-point table (32 bytes a point) and the kernels' uniforms go up.
 //! - The resampling's point location ([`resample_locate`]) keeps the reference mesh and its
-//!   locator on the device for the whole run; per resampling it uploads the plate table and the
-//!   old crust's plates and crust types, and reads back one located source per sample.
-//!
-//! - The resampling's interpolation ([`resample_interpolate`]) keeps the positions and
-//!   triangles on the device; per resampling it uploads the located sources, the plate table and
-//!   the old crust, and reads back the new crust (CPU systems edit it next).
+//!   locator on the device for the whole run and reads the old crust's plates and crust types
+//!   from the resident buffers; per resampling it uploads the plate table and reads back one
+//!   located source per sample. The sources the host rechecks go back into the kernel's output
+//!   on the device ([`sources_patch`]).
+//! - The resampling's interpolation ([`resample_interpolate`]) reads the old crust from the
+//!   resident buffers and the sources from the location's output, and reads back the new crust
+//!   (CPU systems edit it next).
 //! - The collision surges after a resampling ([`collision_uplift`]) keep the reference
 //!   positions on the device for the run; per surge they upload the distances to the sutured
-//!   terrane (found on the CPU by a graph search), and the fields they write are read back once.
+//!   terrane (found on the CPU by a graph search); the fields they write stay on the device.
 //!
 //! [`GpuTraffic`] counts the bytes both ways; `planet bench --backend gpu` prints them per step.
 

@@ -1082,15 +1082,24 @@ fn hotspots_on_the_gpu_backend_pull_before_they_write() {
     if gpu_or_skip("hotspots on gpu").is_none() {
         return;
     }
-    // The hotspot plugin writes the crust every step; it pulls first, so lazy sync neither
-    // fails (stale write) nor changes the result.
+    // The hotspot plugin writes the crust every step; it pulls the elevation first and
+    // declares its write of elevation and thickness (or pulls everything when it cannot), so
+    // lazy sync neither fails (stale write) nor changes the result.
     let run = |eager: bool| {
         let mut sim = gpu_sim(10_000, 6, eager);
         sim.set_enabled("hotspots", true).expect("hotspots");
         sim.run_steps(12).expect("steps with hotspots");
-        sim.state_hash()
+        let traffic = sim.world().resource::<GpuContext>().traffic;
+        (sim.state_hash(), traffic, sim.clock().resamplings)
     };
-    assert_eq!(run(false), run(true));
+    let (lazy, traffic, resamplings) = run(false);
+    assert_eq!(lazy, run(true).0);
+    // Declared writes: the crust does not go up in full every step (before stage 3 it did:
+    // the pull moved nothing, but the write moved the change tick).
+    assert!(
+        traffic.crust_uploads <= resamplings + 1,
+        "{traffic:?}, {resamplings} resamplings"
+    );
 }
 
 #[test]

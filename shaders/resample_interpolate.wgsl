@@ -13,19 +13,25 @@ struct InterpolateUniforms {
     row_stride: u32,
     // Words of a packed u8 field: ceil(count / 4).
     packed_words: u32,
-    _pad: u32,
+    // Word offset in `plates` of the frame group of each plate id, and its entries.
+    ids_at: u32,
+    id_count: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 // Layout of the old crust (`old`) and of the new one (`next`), in words, for n samples and
 // nw = ceil(n / 4): elevation [0, n), thickness [n, 2n), age [2n, 3n), orogeny age [3n, 4n),
 // ridge direction [4n, 7n), fold direction [7n, 10n), crust type (packed) [10n, 10n + nw),
-// orogeny (packed) [10n + nw, 10n + 2nw), then, for `old`, the frame group of each sample's
-// plate, and for `next` the plate of each sample [10n + 2nw, 11n + 2nw).
+// orogeny (packed) [10n + nw, 10n + 2nw), then the plate id of each sample
+// [10n + 2nw, 11n + 2nw).
 
 @group(0) @binding(0) var<uniform> u: InterpolateUniforms;
 // Per sample, 8 words: slot (NONE32 for a gap), plate, suture, flags, triangle, 3 weights.
 @group(0) @binding(1) var<storage, read> sources: array<u32>;
-// Per slot, 16 words: frame group, 3 unused, then the rows of world ← plate, each padded to 4.
+// Per slot, 16 words: frame group, 3 unused, then the rows of world ← plate, each padded to 4;
+// then, from word `u.ids_at`, the frame group of each plate id (NONE32 for no plate).
 @group(0) @binding(2) var<storage, read> plates: array<u32>;
 // Reference positions (3 f32 a sample) then the triangles (3 u32 a triangle) from word
 // `3 * count`.
@@ -41,6 +47,15 @@ fn old_f(k: u32) -> f32 {
 
 fn old_byte(section: u32, v: u32) -> u32 {
     return byte_of(old[section + (v >> 2u)], v);
+}
+
+// The frame group of the old plate of vertex v (NONE32 for a plate not in the table).
+fn old_group(tail_at: u32, v: u32) -> u32 {
+    let id = old[tail_at + v];
+    if (id < u.id_count) {
+        return plates[u.ids_at + id];
+    }
+    return NONE32;
 }
 
 fn lerp(section: u32, v: vec3<u32>, w: vec3<f32>) -> f32 {
@@ -98,9 +113,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let p = 16u * slot;
         let group = plates[p];
         let valid = vec3<bool>(
-            old[tail_at + v.x] == group,
-            old[tail_at + v.y] == group,
-            old[tail_at + v.z] == group,
+            old_group(tail_at, v.x) == group,
+            old_group(tail_at, v.y) == group,
+            old_group(tail_at, v.z) == group,
         );
         let kept = select(0.0, w_all.x, valid.x) + select(0.0, w_all.y, valid.y)
             + select(0.0, w_all.z, valid.z);

@@ -34,6 +34,7 @@ pub mod prelude {
     pub use crate::geometry::spherical::angle_between;
     pub use crate::gpu::{
         BackendChoice, ComputeBackend, FieldMask, GpuContext, pull_or_record, sync_crust_to_host,
+        write_crust_fields,
     };
     pub use crate::io::params::{ParamError, ParamKind, ParamSpec, ParamValue, Params};
     pub use crate::io::plugin_params::{

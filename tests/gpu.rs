@@ -19,12 +19,13 @@ use tectonic_planets::gpu::crust_reduce::{
 };
 use tectonic_planets::gpu::erosion::{ErosionRates, erosion_cpu, erosion_dispatch};
 use tectonic_planets::gpu::resample_interpolate::{
-    resample_interpolate_cpu, resample_interpolate_gpu,
+    resample_interpolate_cpu, resample_interpolate_gpu, resample_interpolate_gpu_located,
 };
 use tectonic_planets::gpu::resample_locate::{
     CellPlates, OverlapRules, SampleSource, resample_locate_cpu, resample_locate_gpu,
     resample_locate_raw,
 };
+use tectonic_planets::gpu::sources_patch::{sources_patch_cpu, sources_patch_gpu};
 use tectonic_planets::gpu::subduction_uplift::{
     UpliftConstants, read_back, subduction_uplift_cpu, subduction_uplift_dispatch,
 };
@@ -574,6 +575,8 @@ fn resample_locate_kernel_matches_cpu_reference() {
     // The kernel alone. Its output starts poisoned (the host vector is all ones: NaN weights,
     // gaps), so a dispatch or readback that writes nothing cannot pass.
     let cells = CellPlates::build(&mesh, crust, table);
+    // The kernels read the old crust from the resident buffers.
+    ctx.sync_crust(crust, None).expect("upload");
     let (raw, doubtful) =
         resample_locate_raw(&mut ctx, &mesh, crust, table, &rules, &cells).expect("kernel");
     let mut is_doubtful = vec![false; N];
@@ -632,6 +635,21 @@ fn resample_locate_kernel_matches_cpu_reference() {
         gaps,
         "seed {seed}: gaps differ"
     );
+    // Stage 3b: the interpolation kernel reading the sources left on the device (the
+    // rechecked ones written back by sources_patch) gives the same bits as with the host's
+    // sources uploaded.
+    let (mut from_host, mut from_device) = (Crust::default(), Crust::default());
+    resample_interpolate_gpu(&mut ctx, &mesh, crust, table, &gpu, &mut from_host)
+        .expect("interpolate, host sources");
+    resample_interpolate_gpu_located(&mut ctx, &mesh, crust, table, &gpu, &mut from_device)
+        .expect("interpolate, device sources");
+    assert_eq!(
+        from_host.hash(),
+        from_device.hash(),
+        "seed {seed}: sources on the device differ from the host's ({} rechecked)",
+        report.rechecked
+    );
+    assert!(report.rechecked > 0, "seed {seed}: nothing rechecked");
     let (mut next_cpu, mut next_gpu) = (Crust::default(), Crust::default());
     interpolate(&mesh, crust, table, &cpu, &mut next_cpu);
     interpolate(&mesh, crust, table, &gpu, &mut next_gpu);
@@ -670,6 +688,13 @@ fn resample_interpolate_kernel_matches_cpu_reference() {
     resample_interpolate_cpu(&mesh, crust, &table, &sources, &mut cpu);
     // The output starts as garbage of the wrong size: everything must come from the device.
     let mut gpu = random_crust(7, &mut rng);
+    // The kernel reads the old crust from the resident buffers: without them, an error.
+    if ctx.crust_buffers().is_none() {
+        let err = resample_interpolate_gpu(&mut ctx, &mesh, crust, &table, &sources, &mut gpu)
+            .unwrap_err();
+        assert!(err.to_string().contains("not on the device"), "{err}");
+    }
+    ctx.sync_crust(crust, None).expect("upload");
     // Bad input is an error, not a panic or an out-of-bounds read on the device.
     assert!(
         resample_interpolate_gpu(&mut ctx, &mesh, crust, &table, &sources[..5], &mut gpu).is_err()
@@ -799,12 +824,13 @@ fn fifty_steps_on_gpu_match_fifty_steps_on_cpu() {
     );
     // Collisions happened and their surges ran on the device.
     assert!(traffic.collision_surges > 0, "{traffic:?}");
-    // Full uploads of the crust only around resamplings, not every step: the collision
-    // kernel's right after a resampling where a terrane sutured, then the next kernels' after
-    // the CPU systems that write the crust around a resampling (measured: 37 for 16
-    // resamplings with the collision kernel on the device).
+    // Full uploads of the crust: the first, then one per resampling (the new crust, by the
+    // collision kernel when a terrane sutured, else by the next step's first kernel). Rifts
+    // and close_trapped_ocean declare their writes (stage 3), so nothing else goes up in full
+    // (measured: 17 for 16 resamplings; 37 before stage 3, when the bound was 3 per
+    // resampling).
     assert!(
-        traffic.crust_uploads <= 3 * resamplings + 1 && traffic.crust_uploads < 50,
+        traffic.crust_uploads <= resamplings + 1,
         "{traffic:?}, {resamplings} resamplings"
     );
     let (agree, rms_m) = compare(cpu.mesh(), cpu.crust(), gpu.crust());
@@ -1056,15 +1082,24 @@ fn hotspots_on_the_gpu_backend_pull_before_they_write() {
     if gpu_or_skip("hotspots on gpu").is_none() {
         return;
     }
-    // The hotspot plugin writes the crust every step; it pulls first, so lazy sync neither
-    // fails (stale write) nor changes the result.
+    // The hotspot plugin writes the crust every step; it pulls the elevation first and
+    // declares its write of elevation and thickness (or pulls everything when it cannot), so
+    // lazy sync neither fails (stale write) nor changes the result.
     let run = |eager: bool| {
         let mut sim = gpu_sim(10_000, 6, eager);
         sim.set_enabled("hotspots", true).expect("hotspots");
         sim.run_steps(12).expect("steps with hotspots");
-        sim.state_hash()
+        let traffic = sim.world().resource::<GpuContext>().traffic;
+        (sim.state_hash(), traffic, sim.clock().resamplings)
     };
-    assert_eq!(run(false), run(true));
+    let (lazy, traffic, resamplings) = run(false);
+    assert_eq!(lazy, run(true).0);
+    // Declared writes: the crust does not go up in full every step (before stage 3 it did:
+    // the pull moved nothing, but the write moved the change tick).
+    assert!(
+        traffic.crust_uploads <= resamplings + 1,
+        "{traffic:?}, {resamplings} resamplings"
+    );
 }
 
 #[test]
@@ -1196,4 +1231,182 @@ fn crust_reduce_kernel_matches_crust_stats_and_check_finite() {
             );
         }
     }
+}
+
+#[test]
+fn sources_patch_kernel_matches_cpu_reference_bit_for_bit() {
+    let Some(mut ctx) = gpu_or_skip("sources patch") else {
+        return;
+    };
+    let seed = fresh_seed("GPU_TEST_SEED");
+    let mut rng = SimRng::new(seed, 12);
+    let word = |rng: &mut SimRng| (rng.next_f64() * 4_294_967_296.0) as u32;
+    let mut words: Vec<[u32; 8]> = (0..N)
+        .map(|_| std::array::from_fn(|_| word(&mut rng)))
+        .collect();
+    words[3][5] = 0x7fc0_1234; // a NaN payload stays as it is
+    let target = ctx.storage_buffer("test sources", 32 * N);
+    ctx.upload(&target, bytemuck::cast_slice(&words));
+    // About 2% of the samples, distinct, in random order, with the first and the last.
+    let mut index: Vec<u32> = (0..N as u32).filter(|_| rng.next_f64() < 0.02).collect();
+    index.extend([0, N as u32 - 1]);
+    index.sort_unstable();
+    index.dedup();
+    for k in (1..index.len()).rev() {
+        let j = (rng.next_f64() * (k + 1) as f64) as usize % (k + 1);
+        index.swap(k, j);
+    }
+    let patches: Vec<(u32, [u32; 8])> = index
+        .iter()
+        .map(|&j| (j, std::array::from_fn(|_| word(&mut rng))))
+        .collect();
+    sources_patch_gpu(&mut ctx, &target, N, &patches).expect("patch");
+    let mut gpu = vec![[0u32; 8]; N];
+    ctx.download("test", &target, bytemuck::cast_slice_mut(&mut gpu))
+        .expect("download");
+    sources_patch_cpu(&mut words, &patches);
+    for j in 0..N {
+        assert_eq!(gpu[j], words[j], "seed {seed}: sample {j}");
+    }
+    assert!(sources_patch_gpu(&mut ctx, &target, N, &[(N as u32, [0; 8])]).is_err());
+}
+
+#[test]
+fn a_resampling_gpu_step_moves_no_old_crust_over_the_bus() {
+    if gpu_or_skip("resampling-step traffic").is_none() {
+        return;
+    }
+    let n = 20_000u64;
+    let mut sim = gpu_sim(n, 9, false);
+    // The first resampling uploads the kernels' per-run mesh data (positions, triangles,
+    // locator cells: about 100 B/sample, once); measure the ones after it.
+    sim.request_resample();
+    sim.step().expect("first step");
+    assert_eq!(sim.clock().resamplings, 1);
+    let mut measured = Vec::new();
+    for k in 0..16 {
+        // A resampling every other step (asked for), so both kinds of step come.
+        if k % 2 == 0 {
+            sim.request_resample();
+        }
+        let before = sim.world().resource::<GpuContext>().traffic;
+        let (resamplings, since) = (sim.clock().resamplings, sim.clock().steps_since_resample);
+        sim.step().expect("step");
+        let after = sim.world().resource::<GpuContext>().traffic;
+        if sim.clock().resamplings == resamplings {
+            continue;
+        }
+        let up = after.uploaded_bytes - before.uploaded_bytes;
+        let down = after.downloaded_bytes - before.downloaded_bytes;
+        let full = after.crust_uploads - before.crust_uploads;
+        let surges = after.collision_surges - before.collision_surges;
+        let per = |b: u64| b as f64 / n as f64;
+        // Up, besides the full crust uploads (46 B/sample each: the crust a CPU system wrote,
+        // or the new crust for the collision kernel) and the distances of each collision surge
+        // (4 B/sample): the convergence field in the step after a resampling (16 B), the
+        // suture of each old sample when sutures are pending (4 B), the declared writes of a
+        // rift (plate ids, 4 B) and of close_trapped_ocean (9 B), the front table, the plate
+        // table and locator cell lists, the rechecked sources (36 B each, ~1.5%). Before stage
+        // 3 the old crust also went up for the interpolation (46 B), its plates and crust types
+        // for the location (5 B) and every source (32 B).
+        let other_up = up.saturating_sub(46 * n * full + 4 * n * surges);
+        let up_bound = 16 * n + if since == 0 { 16 * n } else { 0 } + 4 * n + 13 * n;
+        // Down: the located sources (32 B) and the new crust (46 B), the reduction and the
+        // front gather (~1 B at 20k), and, after a collision, the elevation when
+        // close_trapped_ocean welds a sliver (4 B). Before stage 3 the stale fields were pulled
+        // before the resampling too (25 B), and the collision kernel's fields at once (21 B).
+        let bound = 80 * n + if surges > 0 { 4 * n } else { 0 };
+        measured.push((per(other_up), per(down), full, surges, since));
+        // At most one full upload: the old crust if a CPU system wrote it undeclared, or the
+        // new crust for the collision kernel (before stage 3 the collision's readback and
+        // close_trapped_ocean's write made the next step upload it again).
+        assert!(full <= 1, "{full} full crust uploads in a resampling step");
+        assert!(
+            down <= bound,
+            "{:.1} B/sample down in a resampling step ({surges} surges)",
+            per(down)
+        );
+        assert!(
+            other_up <= up_bound,
+            "{:.1} B/sample up in a resampling step besides {full} full crust uploads and \
+             {surges} surges",
+            per(other_up)
+        );
+    }
+    eprintln!(
+        "resampling steps (other up B/sample, down B/sample, full crust uploads, surges, steps \
+         since the last resampling): {measured:?}"
+    );
+    assert!(measured.len() >= 5, "{measured:?}");
+}
+
+#[test]
+fn a_declared_host_write_uploads_only_its_fields() {
+    use bevy_ecs::change_detection::DetectChanges;
+    use tectonic_planets::gpu::write_crust_fields;
+    let Some(mut ctx) = gpu_or_skip("declared host write") else {
+        return;
+    };
+    let seed = fresh_seed("GPU_TEST_SEED");
+    let mut rng = SimRng::new(seed, 13);
+    let crust = random_crust(N, &mut rng);
+    let mut world = World::new();
+    world.insert_resource(crust);
+    let tick = world.resource_ref::<Crust>().last_changed();
+    ctx.sync_crust(world.resource::<Crust>(), Some(tick))
+        .expect("upload");
+    // A "kernel" raises sample 3 on the device only: the device holds the elevation newer.
+    let b = ctx.crust_buffers().expect("buffers").elevation_km.clone();
+    let mut z = world.resource::<Crust>().elevation_km.clone();
+    z[3] = 7.25;
+    ctx.upload(&b, bytemuck::cast_slice(&z));
+    let mut scratch = world.resource::<Crust>().clone();
+    ctx.note_device_write(FieldMask::ELEVATION, &mut scratch)
+        .expect("note");
+    world.insert_resource(ctx);
+    // Re-inserting the context must not count as a crust write.
+    let before = world.resource::<GpuContext>().traffic;
+    // Each write as from a later system (a schedule advances the change tick per system).
+    world.increment_change_tick();
+    write_crust_fields(&mut world, FieldMask::PLATE, |c| c.plate[5] = 77).expect("write");
+    let after = world.resource::<GpuContext>().traffic;
+    // Only the plate ids went up (4 B/sample), nothing came down, no full upload; the device
+    // still holds the elevation newer, and the next kernel's sync uploads nothing.
+    assert_eq!(after.uploaded_bytes - before.uploaded_bytes, 4 * N as u64);
+    assert_eq!(after.downloaded_bytes, before.downloaded_bytes);
+    assert_eq!(after.crust_uploads, before.crust_uploads);
+    let tick = world.resource_ref::<Crust>().last_changed();
+    world.resource_scope(|world, mut g: Mut<GpuContext>| {
+        assert_eq!(g.device_newer(), FieldMask::ELEVATION);
+        assert_ne!(world.resource::<Crust>().elevation_km[3], 7.25);
+        g.sync_crust(world.resource::<Crust>(), Some(tick))
+            .expect("in sync");
+        assert_eq!(g.traffic.crust_uploads, before.crust_uploads);
+        let pb = g.crust_buffers().expect("buffers").plate.clone();
+        let mut plate = vec![0u32; N];
+        g.download("test", &pb, bytemuck::cast_slice_mut(&mut plate))
+            .expect("download");
+        assert_eq!(plate, world.resource::<Crust>().plate);
+        assert_eq!(plate[5], 77);
+        let mut z = vec![0f32; N];
+        g.download("test", &b, bytemuck::cast_slice_mut(&mut z))
+            .expect("download");
+        assert_eq!(z[3], 7.25, "the device's elevation was lost");
+    });
+    // A write of a field the device holds newer cannot be declared: every stale field comes
+    // down first, and the next sync uploads the whole crust.
+    world.increment_change_tick();
+    write_crust_fields(&mut world, FieldMask::ELEVATION, |c| {
+        c.elevation_km[4] = 1.5
+    })
+    .expect("write");
+    assert_eq!(world.resource::<Crust>().elevation_km[3], 7.25);
+    let tick = world.resource_ref::<Crust>().last_changed();
+    world.resource_scope(|world, mut g: Mut<GpuContext>| {
+        assert!(g.device_newer().is_empty());
+        let uploads = g.traffic.crust_uploads;
+        g.sync_crust(world.resource::<Crust>(), Some(tick))
+            .expect("upload");
+        assert_eq!(g.traffic.crust_uploads, uploads + 1);
+    });
 }

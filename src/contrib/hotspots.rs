@@ -335,11 +335,20 @@ fn build_and_subside(
     hotspots: Query<&Hotspot>,
     mut edifices: Query<(Entity, &mut Edifice)>,
     mut marks: Local<Marks>,
-    gpu: Option<ResMut<GpuContext>>,
+    mut gpu: Option<ResMut<GpuContext>>,
 ) {
-    // On the GPU backend, pull what the device holds newer before reading and writing the crust.
-    if let Some(mut gpu) = gpu {
-        pull_or_record(&mut gpu, &mut crust, FieldMask::ALL);
+    // On the GPU backend: the elevation is read, so it comes down; the writes touch only
+    // elevation and thickness, so when the device is otherwise in sync they are declared and
+    // only those two fields go up afterwards (8 B/sample) instead of the whole crust. When
+    // they cannot be declared, every stale field comes down first and the next kernel uploads
+    // the whole crust.
+    const WRITES: FieldMask = FieldMask(FieldMask::ELEVATION.0 | FieldMask::THICKNESS.0);
+    let declared = gpu.as_mut().is_some_and(|g| {
+        pull_or_record(g, &mut crust, FieldMask::ELEVATION)
+            && g.can_declare_host_write(WRITES, crust.len(), crust.last_changed())
+    });
+    if !declared && let Some(g) = gpu.as_mut() {
+        pull_or_record(g, &mut crust, FieldMask::ALL);
     }
     let s = HotspotSettings::from_registry(&plugin_params);
     let dt = params.time.time_step_my;
@@ -358,7 +367,8 @@ fn build_and_subside(
     let mut grown = vec![false; list.len()];
     let mut fresh: Vec<Edifice> = Vec::new();
     let mut samples = Vec::new();
-    let crust = &mut *crust;
+    let mut crust_res = crust;
+    let crust = &mut *crust_res;
     for spot in &spots {
         // The plate over the hotspot: highest surface among the plates owning the nearest
         // sample in their own frame.
@@ -469,6 +479,13 @@ fn build_and_subside(
     }
     for e in fresh {
         commands.spawn(e);
+    }
+    if declared
+        && let Some(g) = gpu.as_mut()
+        && let Err(e) = g.note_host_write(&crust_res, WRITES, crust_res.last_changed())
+        && g.failure.is_none()
+    {
+        g.failure = Some(e);
     }
 }
 

@@ -7,11 +7,14 @@
 //! `propagate_nearest`) stays on the CPU; per surge, the distances go up (4 bytes a sample) with
 //! the uniforms, and the reference positions go up once per mesh (12 bytes a sample). The
 //! surges of one resampling run one after the other on the device, in the CPU's order, and the
-//! fields they write are read back once at the end.
+//! fields they write ([`WRITES`]) stay on the device, marked newer there
+//! ([`GpuContext::note_device_write`]); the CPU systems after them pull what they read.
 
 use glam::DVec3;
 
-use crate::gpu::{GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer};
+use crate::gpu::{
+    FieldMask, GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer,
+};
 use crate::resources::Crust;
 pub use crate::systems::convergence::{CollisionSurge, collision_uplift_cpu};
 
@@ -197,8 +200,16 @@ pub fn collision_uplift_gpu(
     Ok(())
 }
 
-/// Reads the fields the kernel writes (elevation, orogeny, orogeny age, fold direction) back
-/// into `crust`.
+/// The fields the kernel writes on the device: elevation, orogeny, orogeny age, fold direction.
+pub const WRITES: FieldMask = FieldMask(
+    FieldMask::ELEVATION.0
+        | FieldMask::OROGENY.0
+        | FieldMask::OROGENY_AGE.0
+        | FieldMask::FOLD_DIR.0,
+);
+
+/// Reads the fields the kernel writes ([`WRITES`]) back into `crust` (a [`GpuContext::pull`]
+/// of them; the simulation itself leaves them on the device and lets readers pull).
 pub fn read_back(ctx: &mut GpuContext, crust: &mut Crust) -> Result<(), GpuError> {
-    crate::gpu::subduction_uplift::read_back_fields(ctx, KERNEL, crust)
+    ctx.pull_written(WRITES, crust)
 }

@@ -4,26 +4,30 @@
 //! (`shaders/<kernel>.wgsl`), each with its CPU reference `<kernel>_cpu`.
 //!
 //! What stays on the device, and when it is synced (the crust is also read by CPU systems every
-//! step — fronts, collisions, terranes, diagnostics, resampling — so it cannot live only there):
-//! - The crust fields the kernels touch (elevation, crust type, age, orogeny, orogeny age, fold
-//!   direction) are device buffers kept between steps. A kernel uploads them only when the host
-//!   [`Crust`] changed since the last sync (bevy change ticks): after a resampling, a collision,
-//!   a load, or any CPU system that wrote the crust. In a step without such a change nothing of
-//!   the crust goes up.
-//! - After each kernel, the fields it wrote are read back into the host [`Crust`] (CPU systems
-//!   later in the step and the next step read them), and the device copy is marked in sync.
+//! step — fronts, collisions, terranes, diagnostics, resampling — so it cannot live only there;
+//! docs/gpu.md and docs/gpu-residency.md have the details and the measured bytes):
+//! - The whole crust (46 bytes a sample, [`CrustBuffers`]) is kept in device buffers between
+//!   steps. It goes up in full only when the host [`Crust`] changed since the last sync (bevy
+//!   change ticks): after a resampling, a load, or a CPU system that wrote the crust undeclared.
+//!   A writer that declares the fields it changes ([`write_crust_fields`]) uploads only those.
+//! - Kernels do not read back what they write: they mark the fields newer on the device
+//!   ([`GpuContext::device_newer`]), and CPU readers pull the fields they need
+//!   ([`GpuContext::pull`], [`sync_crust_to_host`], [`pull_or_record`]) without moving the
+//!   crust's change tick. The fronts gather their few elevations ([`crust_gather`]) and the
+//!   diagnostics reduce on the device ([`crust_reduce`]).
 //! - The convergence field (distances to the fronts) goes up once per resampling; per step only
 //!   the front-point table (32 bytes a point) and the kernels' uniforms go up.
 //! - The resampling's point location ([`resample_locate`]) keeps the reference mesh and its
-//!   locator on the device for the whole run; per resampling it uploads the plate table and the
-//!   old crust's plates and crust types, and reads back one located source per sample.
-//!
-//! - The resampling's interpolation ([`resample_interpolate`]) keeps the positions and
-//!   triangles on the device; per resampling it uploads the located sources, the plate table and
-//!   the old crust, and reads back the new crust (CPU systems edit it next).
+//!   locator on the device for the whole run and reads the old crust's plates and crust types
+//!   from the resident buffers; per resampling it uploads the plate table and reads back one
+//!   located source per sample. The sources the host rechecks go back into the kernel's output
+//!   on the device ([`sources_patch`]).
+//! - The resampling's interpolation ([`resample_interpolate`]) reads the old crust from the
+//!   resident buffers and the sources from the location's output, and reads back the new crust
+//!   (CPU systems edit it next).
 //! - The collision surges after a resampling ([`collision_uplift`]) keep the reference
 //!   positions on the device for the run; per surge they upload the distances to the sutured
-//!   terrane (found on the CPU by a graph search), and the fields they write are read back once.
+//!   terrane (found on the CPU by a graph search); the fields they write stay on the device.
 //!
 //! [`GpuTraffic`] counts the bytes both ways; `planet bench --backend gpu` prints them per step.
 
@@ -35,6 +39,7 @@ pub mod crust_reduce;
 pub mod erosion;
 pub mod resample_interpolate;
 pub mod resample_locate;
+pub mod sources_patch;
 pub mod subduction_uplift;
 
 use std::sync::{Arc, Mutex};
@@ -136,9 +141,10 @@ pub enum GpuError {
 }
 
 /// A set of the resident crust fields (bits), used to record which ones the device holds newer
-/// than the host [`Crust`].
+/// than the host [`Crust`] (the first five bits, [`FieldMask::ALL`]) and which ones a host
+/// writer declares ([`write_crust_fields`], any bit).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub struct FieldMask(pub u8);
+pub struct FieldMask(pub u16);
 
 impl FieldMask {
     /// No field.
@@ -155,6 +161,16 @@ impl FieldMask {
     pub const FOLD_DIR: Self = Self(16);
     /// Every field a kernel writes (crust type is never written on the device).
     pub const ALL: Self = Self(31);
+    /// Crust thickness (no kernel writes it).
+    pub const THICKNESS: Self = Self(32);
+    /// Ridge direction (no kernel writes it).
+    pub const RIDGE_DIR: Self = Self(64);
+    /// Plate id (no kernel writes it).
+    pub const PLATE: Self = Self(128);
+    /// Crust type (no kernel writes it).
+    pub const CRUST_TYPE: Self = Self(256);
+    /// Every resident field.
+    pub const EVERY_FIELD: Self = Self(511);
     /// True when no bit is set.
     pub fn is_empty(self) -> bool {
         self.0 == 0
@@ -219,6 +235,13 @@ pub struct CrustBuffers {
     pub orogeny_age_my: wgpu::Buffer,
     /// Fold direction, three f32 per sample, plate frame.
     pub fold_dir: wgpu::Buffer,
+    /// Crust thickness, f32 per sample, km (no kernel writes it; the resampling reads it).
+    pub thickness_km: wgpu::Buffer,
+    /// Ridge direction, three f32 per sample, plate frame (no kernel writes it; the
+    /// resampling reads it).
+    pub ridge_dir: wgpu::Buffer,
+    /// Plate id, u32 per sample (no kernel writes it; the resampling reads it).
+    pub plate: wgpu::Buffer,
 }
 
 /// The wgpu device and everything the kernels keep on it (a resource, present only on the GPU
@@ -240,6 +263,7 @@ pub struct GpuContext {
     pub(crate) interpolate: resample_interpolate::InterpolateKernel,
     pub(crate) gather: crust_gather::GatherKernel,
     pub(crate) reduce: crust_reduce::ReduceKernel,
+    pub(crate) patch: sources_patch::PatchKernel,
     crust: Option<CrustBuffers>,
     crust_synced: Option<Tick>,
     device_newer: FieldMask,
@@ -368,6 +392,7 @@ impl GpuContext {
         let interpolate = resample_interpolate::InterpolateKernel::new(&device);
         let gather = crust_gather::GatherKernel::new(&device);
         let reduce = crust_reduce::ReduceKernel::new(&device);
+        let patch = sources_patch::PatchKernel::new(&device);
         let ctx = Self {
             device,
             queue,
@@ -381,6 +406,7 @@ impl GpuContext {
             interpolate,
             gather,
             reduce,
+            patch,
             crust: None,
             crust_synced: None,
             device_newer: FieldMask::NONE,
@@ -555,6 +581,9 @@ impl GpuContext {
                 orogeny: self.storage_buffer("crust orogeny (u8 x4)", n),
                 orogeny_age_my: self.storage_buffer("crust orogeny_age_my", 4 * n),
                 fold_dir: self.storage_buffer("crust fold_dir", 12 * n),
+                thickness_km: self.storage_buffer("crust thickness_km", 4 * n),
+                ridge_dir: self.storage_buffer("crust ridge_dir", 12 * n),
+                plate: self.storage_buffer("crust plate", 4 * n),
             };
             self.crust = Some(b);
             self.erosion.forget_bind_group();
@@ -579,6 +608,9 @@ impl GpuContext {
             bytemuck::cast_slice(&crust.orogeny_age_my),
         );
         self.upload(&b.fold_dir, bytemuck::cast_slice(&crust.fold_dir));
+        self.upload(&b.thickness_km, bytemuck::cast_slice(&crust.thickness_km));
+        self.upload(&b.ridge_dir, bytemuck::cast_slice(&crust.ridge_dir));
+        self.upload(&b.plate, bytemuck::cast_slice(&crust.plate));
         self.crust = Some(b);
         self.crust_synced = host_tick;
         self.traffic.crust_uploads += 1;
@@ -614,6 +646,87 @@ impl GpuContext {
             self.pull(crust, FieldMask::ALL)?;
         }
         Ok(())
+    }
+
+    /// Marks `fields` newer on the device (a kernel wrote them) and pulls them into `crust` at
+    /// once (tests and the kernels' `read_back` helpers; the systems leave them on the device).
+    pub fn pull_written(&mut self, fields: FieldMask, crust: &mut Crust) -> Result<(), GpuError> {
+        self.device_newer |= fields;
+        self.pull(crust, fields)
+    }
+
+    /// Whether a host write of `fields` into a crust of `len` samples whose change tick is
+    /// `before` can be declared (see [`write_crust_fields`]): the device copy is in sync with
+    /// the host as of `before` and holds none of `fields` newer.
+    pub fn can_declare_host_write(&self, fields: FieldMask, len: usize, before: Tick) -> bool {
+        self.crust_synced == Some(before)
+            && self.crust.as_ref().is_some_and(|b| b.len == len)
+            && self.device_newer.and(fields).is_empty()
+    }
+
+    /// After a declared host write (see [`Self::can_declare_host_write`]): uploads the fields of
+    /// `fields` of `crust` whole and records the device in sync with the host change tick
+    /// `after` (the tick the write moved the crust to). The other fields were not written, so
+    /// the device's copies (newer or not) stay as they are.
+    pub fn note_host_write(
+        &mut self,
+        crust: &Crust,
+        fields: FieldMask,
+        after: Tick,
+    ) -> Result<(), GpuError> {
+        let Some(b) = self.crust.take() else {
+            return Err(GpuError::Kernel {
+                kernel: "crust field upload",
+                message: "no crust buffers".into(),
+            });
+        };
+        if b.len != crust.len() || !self.device_newer.and(fields).is_empty() {
+            let message = format!(
+                "declared write of {fields:?}: host {} samples, device {}, device newer {:?}",
+                crust.len(),
+                b.len,
+                self.device_newer
+            );
+            self.crust = Some(b);
+            return Err(GpuError::Kernel {
+                kernel: "crust field upload",
+                message,
+            });
+        }
+        let has = |f: FieldMask| fields.and(f) == f;
+        if has(FieldMask::ELEVATION) {
+            self.upload(&b.elevation_km, bytemuck::cast_slice(&crust.elevation_km));
+        }
+        if has(FieldMask::AGE) {
+            self.upload(&b.age_my, bytemuck::cast_slice(&crust.age_my));
+        }
+        if has(FieldMask::OROGENY) {
+            self.upload(&b.orogeny, bytemuck::cast_slice(&crust.orogeny));
+        }
+        if has(FieldMask::OROGENY_AGE) {
+            self.upload(
+                &b.orogeny_age_my,
+                bytemuck::cast_slice(&crust.orogeny_age_my),
+            );
+        }
+        if has(FieldMask::FOLD_DIR) {
+            self.upload(&b.fold_dir, bytemuck::cast_slice(&crust.fold_dir));
+        }
+        if has(FieldMask::THICKNESS) {
+            self.upload(&b.thickness_km, bytemuck::cast_slice(&crust.thickness_km));
+        }
+        if has(FieldMask::RIDGE_DIR) {
+            self.upload(&b.ridge_dir, bytemuck::cast_slice(&crust.ridge_dir));
+        }
+        if has(FieldMask::PLATE) {
+            self.upload(&b.plate, bytemuck::cast_slice(&crust.plate));
+        }
+        if has(FieldMask::CRUST_TYPE) {
+            self.upload(&b.crust_type, bytemuck::cast_slice(&crust.crust_type));
+        }
+        self.crust = Some(b);
+        self.crust_synced = Some(after);
+        self.check("crust field upload")
     }
 
     /// The host is authoritative again (a new crust was installed: resampling, load): forgets
@@ -734,6 +847,66 @@ pub fn sync_crust_to_host(world: &mut World, mask: FieldMask) -> Result<(), GpuE
             None => Ok(()),
         }
     })
+}
+
+/// Writes the host [`Crust`] with `write`, which must change only the fields of `fields`; on the
+/// GPU backend keeps the device copy current without a full upload when it can. If the device
+/// was in sync with the host before the write and holds none of `fields` newer, `write` runs
+/// on the host copy as it is (fields the device holds newer stay stale there and on the device)
+/// and only `fields` go up afterwards ([`GpuContext::note_host_write`]; 4 B/sample for the
+/// plate ids). Otherwise every stale field is pulled first and the next kernel uploads the
+/// whole crust, as for any other host write. The crust's change tick moves as usual. A `write`
+/// that changes a field outside `fields` leaves the device with old data there: declare every
+/// field written.
+pub fn write_crust_fields(
+    world: &mut World,
+    fields: FieldMask,
+    write: impl FnOnce(&mut Crust),
+) -> Result<(), GpuError> {
+    let Some((before, len)) = world
+        .get_resource_ref::<Crust>()
+        .map(|c| (c.last_changed(), c.len()))
+    else {
+        return Ok(());
+    };
+    let declared = world
+        .get_resource::<GpuContext>()
+        .is_some_and(|g| g.failure.is_none() && g.can_declare_host_write(fields, len, before));
+    if !declared {
+        sync_crust_to_host(world, FieldMask::ALL)?;
+    }
+    let after = {
+        let mut crust = world.resource_mut::<Crust>();
+        write(&mut crust);
+        crust.last_changed()
+    };
+    if !declared {
+        return Ok(());
+    }
+    world.resource_scope(|world, mut gpu: Mut<GpuContext>| {
+        gpu.note_host_write(world.resource::<Crust>(), fields, after)
+    })
+}
+
+/// [`write_crust_fields`] from an exclusive system: on failure records the error in the context
+/// (the step then stops with it) and returns false (`write` may not have run).
+pub fn write_crust_fields_or_record(
+    world: &mut World,
+    fields: FieldMask,
+    write: impl FnOnce(&mut Crust),
+) -> bool {
+    match write_crust_fields(world, fields, write) {
+        Ok(()) => true,
+        Err(e) => {
+            tracing::error!("{e}");
+            if let Some(mut g) = world.get_resource_mut::<GpuContext>()
+                && g.failure.is_none()
+            {
+                g.failure = Some(e);
+            }
+            false
+        }
+    }
 }
 
 /// [`sync_crust_to_host`] from an exclusive system: on failure records the error in the context

@@ -4,11 +4,14 @@
 //! function the CPU backend runs).
 //!
 //! What crosses the bus: once per mesh, the reference positions and triangles (about 36 bytes a
-//! sample); per resampling, the located sources (32 bytes a sample), the plate table (64 bytes a
-//! plate), the old crust with the frame group of each sample's plate (46 bytes a sample); back,
-//! the new crust (46 bytes a sample). Which plates moved exactly alike (the CPU compares their
-//! f64 rotations) is decided on the host: each plate gets the slot of the first plate with the
-//! same rotation as its frame group, and the kernel compares groups.
+//! sample); per resampling, the located sources (32 bytes a sample) and the plate table (64
+//! bytes a plate, plus 4 bytes per plate id for the frame group of each id); back, the new crust
+//! (46 bytes a sample). The old crust is the resident one ([`crate::gpu::CrustBuffers`], all 46
+//! bytes a sample since stage 3 of docs/gpu-residency.md), copied on the device into the layout
+//! the kernel reads; call [`GpuContext::sync_crust`] with the old crust first. Which plates moved
+//! exactly alike (the CPU compares their f64 rotations) is decided on the host: each plate gets
+//! the slot of the first plate with the same rotation as its frame group, and the kernel
+//! compares the groups of the plate ids.
 //!
 //! The gaps (samples no plate covers), their nearest plates (a graph search from the covered
 //! samples, not per sample) and the gap filling stay on the CPU.
@@ -37,8 +40,12 @@ pub struct InterpolateUniforms {
     pub row_stride: u32,
     /// Words of a packed u8 field: ceil(count / 4).
     pub packed_words: u32,
+    /// Word offset, in the plate table, of the frame group of each plate id.
+    pub ids_at: u32,
+    /// Entries of that table (the largest plate id plus one).
+    pub id_count: u32,
     /// Padding.
-    pub _pad: u32,
+    pub _pad: [u32; 3],
 }
 
 /// Pipeline and the resident mesh (positions and triangles).
@@ -93,13 +100,43 @@ fn frame_groups(table: &PlateTable) -> Vec<u32> {
 }
 
 /// Interpolates every field of `old` at `sources` into `next` on the device: same semantics as
-/// [`resample_interpolate_cpu`], in f32 (see docs/gpu.md for the tolerances).
+/// [`resample_interpolate_cpu`], in f32 (see docs/gpu.md for the tolerances). The kernel reads
+/// the old crust from the resident buffers, which must hold `old` (call
+/// [`GpuContext::sync_crust`] first; the host copy of `old` may be stale in the fields the
+/// device holds newer, it is only used for its size).
 pub fn resample_interpolate_gpu(
     ctx: &mut GpuContext,
     mesh: &SphereMesh,
     old: &Crust,
     table: &PlateTable,
     sources: &[SampleSource],
+    next: &mut Crust,
+) -> Result<(), GpuError> {
+    interpolate_with(ctx, mesh, old, table, sources, false, next)
+}
+
+/// [`resample_interpolate_gpu`] reading the sources from the device: `sources` must be the ones
+/// the last [`crate::gpu::resample_locate::resample_locate_gpu`] returned, whose output (with
+/// the rechecked samples written back) is still on the device; only the checks read the host
+/// copy. Nothing of the sources goes up. An error if the device holds no complete location.
+pub fn resample_interpolate_gpu_located(
+    ctx: &mut GpuContext,
+    mesh: &SphereMesh,
+    old: &Crust,
+    table: &PlateTable,
+    sources: &[SampleSource],
+    next: &mut Crust,
+) -> Result<(), GpuError> {
+    interpolate_with(ctx, mesh, old, table, sources, true, next)
+}
+
+fn interpolate_with(
+    ctx: &mut GpuContext,
+    mesh: &SphereMesh,
+    old: &Crust,
+    table: &PlateTable,
+    sources: &[SampleSource],
+    located: bool,
     next: &mut Crust,
 ) -> Result<(), GpuError> {
     let n = mesh.len();
@@ -148,7 +185,8 @@ pub fn resample_interpolate_gpu(
         ctx.upload(&buf, bytemuck::cast_slice(&words));
         ctx.interpolate.mesh = Some((buf, key));
     }
-    // The plate table with frame groups.
+    // The plate table with frame groups, then the frame group of every plate id (the old
+    // crust holds plate ids; the kernel maps them through this table).
     let groups = frame_groups(table);
     let mut plate_words: Vec<u32> = Vec::with_capacity(16 * table.plates.len().max(1));
     for (s, p) in table.plates.iter().enumerate() {
@@ -160,58 +198,70 @@ pub fn resample_interpolate_gpu(
             plate_words.push(0);
         }
     }
+    let ids_at = plate_words.len();
+    let id_count = table
+        .plates
+        .iter()
+        .map(|p| p.id as usize + 1)
+        .max()
+        .unwrap_or(0);
+    check_size("the plate table", 4 * (ids_at + id_count), limit)?;
+    plate_words
+        .extend((0..id_count).map(|id| table.slot(id as u32).map_or(u32::MAX, |s| groups[s])));
     if plate_words.is_empty() {
         plate_words.resize(16, 0);
     }
-    // The old crust, laid out as the kernel reads it.
-    let mut words: Vec<u32> = Vec::with_capacity(old_words);
-    for f in [
-        &old.elevation_km,
-        &old.thickness_km,
-        &old.age_my,
-        &old.orogeny_age_my,
-    ] {
-        words.extend(f.iter().map(|x| x.to_bits()));
+    // The old crust is the resident one (stage 3 of docs/gpu-residency.md): copied on the
+    // device into the layout the kernel reads, nothing of it crosses the bus.
+    let Some(b) = ctx.crust_buffers().filter(|b| b.len == n) else {
+        return Err(fail(
+            "the old crust is not on the device (call sync_crust first)".into(),
+        ));
+    };
+    let old_buf = ctx.storage_buffer("resample_interpolate old crust", 4 * old_words);
+    {
+        let (n4, nw4) = (4 * n as u64, 4 * nw as u64);
+        let mut enc = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("resample_interpolate old crust"),
+            });
+        let mut at = 0;
+        for (field, bytes) in [
+            (&b.elevation_km, n4),
+            (&b.thickness_km, n4),
+            (&b.age_my, n4),
+            (&b.orogeny_age_my, n4),
+            (&b.ridge_dir, 3 * n4),
+            (&b.fold_dir, 3 * n4),
+            (&b.crust_type, nw4),
+            (&b.orogeny, nw4),
+            (&b.plate, n4),
+        ] {
+            enc.copy_buffer_to_buffer(field, 0, &old_buf, at, bytes);
+            at += bytes;
+        }
+        ctx.queue.submit([enc.finish()]);
     }
-    for f in [&old.ridge_dir, &old.fold_dir] {
-        words.extend(f.iter().flatten().map(|x| x.to_bits()));
-    }
-    for bytes in [
-        bytemuck::cast_slice::<CrustType, u8>(&old.crust_type),
-        bytemuck::cast_slice::<Orogeny, u8>(&old.orogeny),
-    ] {
-        let mut padded = bytes.to_vec();
-        padded.resize(4 * nw, 0);
-        words.extend(
-            padded
-                .chunks_exact(4)
-                .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])),
-        );
-    }
-    words.extend(
-        old.plate
+    ctx.check(KERNEL)?;
+    let src_buf = if located {
+        match ctx.locate.located_output(n) {
+            Some(b) => b,
+            None => {
+                return Err(fail(
+                    "no complete location of this size on the device".into(),
+                ));
+            }
+        }
+    } else {
+        let source_words: Vec<u32> = sources
             .iter()
-            .map(|&p| table.slot(p).map_or(u32::MAX, |s| groups[s])),
-    );
-    let source_words: Vec<u32> = sources
-        .iter()
-        .flat_map(|s| {
-            [
-                s.slot,
-                s.plate,
-                s.suture,
-                u32::from(s.continental_lost),
-                s.triangle,
-                s.weights[0].to_bits(),
-                s.weights[1].to_bits(),
-                s.weights[2].to_bits(),
-            ]
-        })
-        .collect();
-    let old_buf = ctx.storage_buffer("resample_interpolate old crust", 4 * words.len());
-    ctx.upload(&old_buf, bytemuck::cast_slice(&words));
-    let src_buf = ctx.storage_buffer("resample_interpolate sources", 4 * source_words.len());
-    ctx.upload(&src_buf, bytemuck::cast_slice(&source_words));
+            .flat_map(crate::gpu::sources_patch::source_words)
+            .collect();
+        let buf = ctx.storage_buffer("resample_interpolate sources", 4 * source_words.len());
+        ctx.upload(&buf, bytemuck::cast_slice(&source_words));
+        buf
+    };
     let plate_buf = ctx.storage_buffer("resample_interpolate plates", 4 * plate_words.len());
     ctx.upload(&plate_buf, bytemuck::cast_slice(&plate_words));
     let next_buf = ctx.storage_buffer("resample_interpolate next crust", 4 * old_words);
@@ -234,7 +284,9 @@ pub fn resample_interpolate_gpu(
         count: n as u32,
         row_stride: ROW_STRIDE,
         packed_words: nw as u32,
-        _pad: 0,
+        ids_at: ids_at as u32,
+        id_count: id_count as u32,
+        _pad: [0; 3],
     };
     let (pipeline, uniforms) = (
         ctx.interpolate.pipeline.clone(),

@@ -11,9 +11,13 @@
 //!   (cell starts and triangle lists, about 20 bytes a sample).
 //! - **Per resampling:** the plate table in rank order (rotation plate ← world, cap centroid and
 //!   radius, id, slot: 64 bytes a plate), the override pairs, the suture targets, the locator
-//!   cells' plate lists (8 bytes a cell), the old crust's plate ids and crust types (5 bytes a
-//!   sample) and, when sutures are pending, the suture of every old sample (4 bytes a sample).
-//!   Read back: 32 bytes a sample.
+//!   cells' plate lists (8 bytes a cell) and, when sutures are pending, the suture of every old
+//!   sample (4 bytes a sample). The old crust's plate ids and crust types are the resident
+//!   crust buffers ([`crate::gpu::CrustBuffers`]). Read back: 32 bytes a sample (the CPU needs
+//!   every source: gaps, sutures, lost continents). The output also stays on the device, and
+//!   the sources the host rechecks are written into it ([`crate::gpu::sources_patch`], 36 bytes
+//!   each), so the interpolation reads the sources there
+//!   ([`crate::gpu::resample_interpolate::resample_interpolate_gpu_located`]).
 //!
 //! Precision: the GPU works in f32, the CPU in f64. Where f32 rounding could change a decision
 //! (near a triangle edge or vertex, a tie of corners, a continental weight near 1/2, a locator
@@ -103,6 +107,11 @@ pub(crate) struct LocateKernel {
     pipeline: wgpu::ComputePipeline,
     uniforms: wgpu::Buffer,
     mesh: Option<MeshBuffers>,
+    /// The last location's output on the device (8 words a sample) and its sample count.
+    located: Option<(wgpu::Buffer, usize)>,
+    /// True when `located` holds, for every sample, the source [`resample_locate_gpu`]
+    /// returned (the rechecked samples written back): the interpolation may read it there.
+    located_complete: bool,
 }
 
 impl LocateKernel {
@@ -115,7 +124,20 @@ impl LocateKernel {
                 std::mem::size_of::<LocateUniforms>(),
             ),
             mesh: None,
+            located: None,
+            located_complete: false,
         }
+    }
+}
+
+impl LocateKernel {
+    /// The last location's output on the device when it is complete (see `located_complete`)
+    /// and has `n` samples.
+    pub(crate) fn located_output(&self, n: usize) -> Option<wgpu::Buffer> {
+        self.located
+            .as_ref()
+            .filter(|(_, len)| self.located_complete && *len == n)
+            .map(|(b, _)| b.clone())
     }
 }
 
@@ -208,7 +230,9 @@ fn plate_words(table: &PlateTable) -> Vec<GpuPlate> {
 
 /// Runs the kernel and reads its output back: per sample, the source as the kernel found it
 /// (gaps as [`SampleSource`] gaps), and the samples the kernel left to the CPU (their sources
-/// are gaps here). [`resample_locate_gpu`] then locates those on the CPU.
+/// are gaps here). [`resample_locate_gpu`] then locates those on the CPU. The kernel reads the
+/// old crust's plates and crust types from the resident buffers: call
+/// [`GpuContext::sync_crust`] with `old` first (`old` itself only sizes the check here).
 pub fn resample_locate_raw(
     ctx: &mut GpuContext,
     mesh: &SphereMesh,
@@ -234,6 +258,7 @@ pub fn resample_locate_raw(
             message: "more sutured samples than samples".into(),
         });
     }
+    ctx.locate.located_complete = false;
     ensure_mesh(ctx, mesh)?;
     // The auxiliary buffer: plates, pairs, suture targets, cell lists.
     let plates = plate_words(table);
@@ -249,15 +274,33 @@ pub fn resample_locate_raw(
     let limit = ctx.device.limits().max_storage_buffer_binding_size;
     too_large("the plate table and cell lists", 4 * aux.len(), limit)?;
     too_large("the output", 32 * n, limit)?;
+    // The old crust's plates and crust types are the resident buffers (stage 3 of
+    // docs/gpu-residency.md): nothing of the crust goes up here.
+    let Some((plate_buf, type_buf)) = ctx
+        .crust_buffers()
+        .filter(|b| b.len == n)
+        .map(|b| (b.plate.clone(), b.crust_type.clone()))
+    else {
+        return Err(GpuError::Kernel {
+            kernel: "resample_locate",
+            message: "the old crust is not on the device (call sync_crust first)".into(),
+        });
+    };
     let aux_buf = ctx.storage_buffer("locate aux", 4 * aux.len());
     ctx.upload(&aux_buf, bytemuck::cast_slice(&aux));
-    let plate_buf = ctx.storage_buffer("locate old plate", 4 * n);
-    ctx.upload(&plate_buf, bytemuck::cast_slice(&old.plate));
-    let type_buf = ctx.storage_buffer("locate crust type", n);
-    ctx.upload(&type_buf, bytemuck::cast_slice(&old.crust_type));
     let suture_buf = ctx.storage_buffer("locate sutures", 4 * rules.suture_of_sample.len());
     ctx.upload(&suture_buf, bytemuck::cast_slice(rules.suture_of_sample));
-    let out_buf = ctx.storage_buffer("locate output", 32 * n);
+    // The output stays on the device for the interpolation (one buffer per mesh size).
+    if ctx.locate.located.as_ref().is_none_or(|(_, len)| *len != n) {
+        let buf = ctx.storage_buffer("locate output", 32 * n);
+        ctx.locate.located = Some((buf, n));
+    }
+    let Some(out_buf) = ctx.locate.located.as_ref().map(|(b, _)| b.clone()) else {
+        return Err(GpuError::Kernel {
+            kernel: "resample_locate",
+            message: "no output buffer".into(),
+        });
+    };
     let Some(m) = ctx.locate.mesh.as_ref() else {
         return Err(GpuError::Kernel {
             kernel: "resample_locate",
@@ -341,7 +384,9 @@ pub fn resample_locate_raw(
 }
 
 /// The GPU counterpart of [`resample_locate_cpu`]: locates every sample on the device, then the
-/// samples the kernel left to the CPU with [`locate_one`]. Same outputs as the CPU except the
+/// samples the kernel left to the CPU with [`locate_one`] (on the host copy of `old`'s plates
+/// and crust types, which no kernel writes). The resident crust must hold `old` (call
+/// [`GpuContext::sync_crust`] first). Same outputs as the CPU except the
 /// weights (f32 geometry, see the module documentation).
 pub fn resample_locate_gpu(
     ctx: &mut GpuContext,
@@ -368,6 +413,17 @@ pub fn resample_locate_gpu(
             )
         })
         .collect();
+    // The rechecked sources go into the kernel's output on the device as well (36 bytes each),
+    // so the interpolation reads every source there (stage 3b of docs/gpu-residency.md).
+    let patches: Vec<(u32, [u32; 8])> = doubtful
+        .iter()
+        .zip(&redone)
+        .map(|(&j, s)| (j, crate::gpu::sources_patch::source_words(s)))
+        .collect();
+    if let Some((buf, _)) = ctx.locate.located.clone() {
+        crate::gpu::sources_patch::sources_patch_gpu(ctx, &buf, mesh.len(), &patches)?;
+        ctx.locate.located_complete = true;
+    }
     for (&j, s) in doubtful.iter().zip(redone) {
         sources[j as usize] = s;
     }

@@ -10,9 +10,11 @@
 
 use bevy_ecs::change_detection::Tick;
 
-use crate::gpu::{GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer};
+use crate::gpu::{
+    FieldMask, GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer,
+};
 use crate::resources::convergence::NONE;
-use crate::resources::{ConvergenceField, Crust, FrontPoints, Orogeny};
+use crate::resources::{ConvergenceField, Crust, FrontPoints};
 pub use crate::systems::convergence::{UpliftConstants, subduction_uplift_cpu};
 
 /// The kernel's WGSL.
@@ -131,7 +133,6 @@ pub(crate) struct UpliftKernel {
     /// Front table and its capacity in points.
     fronts: Option<(wgpu::Buffer, usize)>,
     bind_group: Option<wgpu::BindGroup>,
-    orogeny_scratch: Vec<u8>,
 }
 
 impl UpliftKernel {
@@ -147,7 +148,6 @@ impl UpliftKernel {
             field_synced: None,
             fronts: None,
             bind_group: None,
-            orogeny_scratch: Vec::new(),
         }
     }
     pub(crate) fn forget_bind_groups(&mut self) {
@@ -269,67 +269,11 @@ pub fn subduction_uplift_dispatch(
     ctx.dispatch(KERNEL, &pipeline, &bg, (n as u32).div_ceil(4))
 }
 
-/// Reads the fields the kernel writes (elevation, orogeny, orogeny age, fold direction) back
-/// into `crust`.
-pub fn read_back(ctx: &mut GpuContext, crust: &mut Crust) -> Result<(), GpuError> {
-    read_back_fields(ctx, KERNEL, crust)
-}
+/// The fields the kernel writes on the device: elevation, orogeny, orogeny age, fold direction.
+pub const WRITES: FieldMask = crate::gpu::collision_uplift::WRITES;
 
-/// Reads elevation, orogeny, orogeny age and fold direction of the resident crust into
-/// `crust`; errors name `kernel`, the kernel that wrote them.
-pub(crate) fn read_back_fields(
-    ctx: &mut GpuContext,
-    kernel: &'static str,
-    crust: &mut Crust,
-) -> Result<(), GpuError> {
-    let Some((z, og, oga, fold)) = ctx.crust_buffers().map(|b| {
-        (
-            b.elevation_km.clone(),
-            b.orogeny.clone(),
-            b.orogeny_age_my.clone(),
-            b.fold_dir.clone(),
-        )
-    }) else {
-        return Err(GpuError::Kernel {
-            kernel,
-            message: "the crust is not on the device".into(),
-        });
-    };
-    ctx.download(
-        kernel,
-        &z,
-        bytemuck::cast_slice_mut(&mut crust.elevation_km),
-    )?;
-    ctx.download(
-        kernel,
-        &oga,
-        bytemuck::cast_slice_mut(&mut crust.orogeny_age_my),
-    )?;
-    ctx.download(kernel, &fold, bytemuck::cast_slice_mut(&mut crust.fold_dir))?;
-    let mut scratch = std::mem::take(&mut ctx.uplift.orogeny_scratch);
-    scratch.resize(crust.len(), 0);
-    let r = ctx.download(kernel, &og, &mut scratch);
-    let mut bad = None;
-    if r.is_ok() {
-        for (i, (o, &b)) in crust.orogeny.iter_mut().zip(&scratch).enumerate() {
-            *o = match b {
-                0 => Orogeny::None,
-                1 => Orogeny::Andean,
-                2 => Orogeny::Himalayan,
-                _ => {
-                    bad = Some((i, b));
-                    Orogeny::None
-                }
-            };
-        }
-    }
-    ctx.uplift.orogeny_scratch = scratch;
-    r?;
-    if let Some((i, b)) = bad {
-        return Err(GpuError::Kernel {
-            kernel,
-            message: format!("orogeny code {b} at sample {i}"),
-        });
-    }
-    Ok(())
+/// Reads the fields the kernel writes ([`WRITES`]) back into `crust` (a [`GpuContext::pull`]
+/// of them; the simulation itself leaves them on the device and lets readers pull).
+pub fn read_back(ctx: &mut GpuContext, crust: &mut Crust) -> Result<(), GpuError> {
+    ctx.pull_written(WRITES, crust)
 }

@@ -441,74 +441,115 @@ pub fn close_trapped_ocean(world: &mut World) {
     if limit <= 0.0 {
         return;
     }
-    let mut crust = world.remove_resource::<Crust>().unwrap_or_default();
-    let mesh = world.resource::<SphereMesh>();
-    let n = mesh.len();
-    let mut seen = vec![false; n];
-    let mut comp = Vec::new();
-    for s in 0..n {
-        if seen[s] || crust.crust_type[s] != CrustType::Oceanic {
-            continue;
-        }
-        comp.clear();
-        comp.push(s);
-        seen[s] = true;
-        let (mut area, mut enclosed, mut k) = (0.0, true, 0);
-        let plate = crust.plate[s];
-        while k < comp.len() {
-            let u = comp[k];
-            k += 1;
-            area += mesh.area_km2[u];
-            for &v in mesh.neighbors_of(u) {
-                let v = v as usize;
-                if crust.crust_type[v] == CrustType::Oceanic {
-                    if !seen[v] {
-                        seen[v] = true;
-                        comp.push(v);
+    // First the trapped components (crust type and plate only, which no GPU kernel writes);
+    // filling one cannot change the test of another (components are not adjacent), so this
+    // finds the same ones as testing and filling in turn.
+    let trapped = {
+        let crust = world.resource::<Crust>();
+        let mesh = world.resource::<SphereMesh>();
+        let n = mesh.len();
+        let mut seen = vec![false; n];
+        let mut trapped: Vec<Vec<usize>> = Vec::new();
+        let mut comp = Vec::new();
+        for s in 0..n {
+            if seen[s] || crust.crust_type[s] != CrustType::Oceanic {
+                continue;
+            }
+            comp.clear();
+            comp.push(s);
+            seen[s] = true;
+            let (mut area, mut enclosed, mut k) = (0.0, true, 0);
+            let plate = crust.plate[s];
+            while k < comp.len() {
+                let u = comp[k];
+                k += 1;
+                area += mesh.area_km2[u];
+                for &v in mesh.neighbors_of(u) {
+                    let v = v as usize;
+                    if crust.crust_type[v] == CrustType::Oceanic {
+                        if !seen[v] {
+                            seen[v] = true;
+                            comp.push(v);
+                        }
+                    } else if crust.plate[v] != plate {
+                        enclosed = false;
                     }
-                } else if crust.plate[v] != plate {
+                }
+                if area >= limit {
                     enclosed = false;
                 }
             }
-            if area >= limit {
-                enclosed = false;
+            if !enclosed || area >= limit || comp.iter().any(|&u| crust.plate[u] != plate) {
+                continue;
             }
+            trapped.push(comp.clone());
         }
-        if !enclosed || area >= limit || comp.iter().any(|&u| crust.plate[u] != plate) {
-            continue;
-        }
-        // Fill from the shore inward with the mean elevation of continental neighbours.
-        let mut remaining: Vec<usize> = comp.clone();
-        while !remaining.is_empty() {
-            let mut next = Vec::new();
-            let mut filled = Vec::new();
-            for &u in &remaining {
-                let (mut sum, mut cnt) = (0.0f64, 0u32);
-                for &v in mesh.neighbors_of(u) {
-                    if crust.crust_type[v as usize] == CrustType::Continental {
-                        sum += crust.elevation_km[v as usize] as f64;
-                        cnt += 1;
+        trapped
+    };
+    // Nothing to weld: the crust is left untouched (its change tick does not move, so on the
+    // GPU backend the device copy, surged by the collision kernel, stays current).
+    if trapped.is_empty() {
+        return;
+    }
+    // The fill reads elevations: on the GPU backend the elevation comes down first (the
+    // collision kernel may have raised it). The fill runs on copies of the elevation and crust
+    // type (later rings read the samples filled before them), then the written samples go into
+    // the crust as a declared write of elevation, crust type and thickness (on the GPU backend
+    // those three fields go up, 9 B/sample, instead of a pull of every field and a full upload).
+    if !crate::gpu::sync_crust_to_host_or_record(world, crate::gpu::FieldMask::ELEVATION) {
+        return;
+    }
+    let thickness = world.resource::<Params>().init.continental_thickness_km as f32;
+    let mut writes: Vec<(usize, f32)> = Vec::new();
+    {
+        let crust = world.resource::<Crust>();
+        let mesh = world.resource::<SphereMesh>();
+        let mut elevation = crust.elevation_km.clone();
+        let mut crust_type = crust.crust_type.clone();
+        for comp in &trapped {
+            // Fill from the shore inward with the mean elevation of continental neighbours.
+            let mut remaining: Vec<usize> = comp.clone();
+            while !remaining.is_empty() {
+                let mut next = Vec::new();
+                let mut filled = Vec::new();
+                for &u in &remaining {
+                    let (mut sum, mut cnt) = (0.0f64, 0u32);
+                    for &v in mesh.neighbors_of(u) {
+                        if crust_type[v as usize] == CrustType::Continental {
+                            sum += elevation[v as usize] as f64;
+                            cnt += 1;
+                        }
+                    }
+                    if cnt > 0 {
+                        filled.push((u, (sum / cnt as f64) as f32));
+                    } else {
+                        next.push(u);
                     }
                 }
-                if cnt > 0 {
-                    filled.push((u, (sum / cnt as f64) as f32));
-                } else {
-                    next.push(u);
+                if filled.is_empty() {
+                    break;
                 }
+                for (u, z) in filled {
+                    elevation[u] = z;
+                    crust_type[u] = CrustType::Continental;
+                    writes.push((u, z));
+                }
+                remaining = next;
             }
-            if filled.is_empty() {
-                break;
-            }
-            for (u, z) in filled {
-                crust.elevation_km[u] = z;
-                crust.crust_type[u] = CrustType::Continental;
-                crust.thickness_km[u] =
-                    world.resource::<Params>().init.continental_thickness_km as f32;
-            }
-            remaining = next;
         }
     }
-    world.insert_resource(crust);
+    use crate::gpu::FieldMask;
+    crate::gpu::write_crust_fields_or_record(
+        world,
+        FieldMask::ELEVATION | FieldMask::CRUST_TYPE | FieldMask::THICKNESS,
+        |crust| {
+            for &(u, z) in &writes {
+                crust.elevation_km[u] = z;
+                crust.crust_type[u] = CrustType::Continental;
+                crust.thickness_km[u] = thickness;
+            }
+        },
+    );
 }
 
 /// Rebuilds the terranes: connected continental regions within each plate, as entities and as
@@ -1102,10 +1143,12 @@ pub fn collision_uplift(world: &mut World) {
     }
     let mut synced = false;
     if let Some(g) = gpu.as_mut().filter(|_| !surges.is_empty()) {
+        // The surged fields stay on the device (lazy host sync, stage 3 of
+        // docs/gpu-residency.md): the CPU systems that follow pull what they read.
         let done = run_or_record(g, |g| {
             g.sync_crust(&crust, crust_tick)?;
             crate::gpu::collision_uplift::collision_uplift_gpu(g, &mesh.positions, &surges)?;
-            crate::gpu::collision_uplift::read_back(g, &mut crust)
+            g.note_device_write(crate::gpu::collision_uplift::WRITES, &mut crust)
         });
         synced = done;
         if !done {

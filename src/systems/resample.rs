@@ -910,7 +910,7 @@ pub fn resample_due(
 #[allow(clippy::too_many_arguments)]
 pub fn resample_interpolate(
     mesh: Res<SphereMesh>,
-    mut crust: ResMut<Crust>,
+    crust: Res<Crust>,
     clock: Res<SimClock>,
     params: Res<Params>,
     plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
@@ -922,13 +922,13 @@ pub fn resample_interpolate(
     mut timings: Option<ResMut<StepTimings>>,
 ) {
     let started = Instant::now();
-    // On the GPU backend, every field the kernels wrote since the last pull comes down first
-    // (lazy host sync): the resampling reads the whole old crust. Systems before this one in
-    // the resampling (`collide_before_resample`) read only plate and crust type, which no
-    // kernel writes.
-    if let Some(g) = gpu.as_mut() {
-        crate::gpu::pull_or_record(g, &mut crust, crate::gpu::FieldMask::ALL);
-    }
+    // On the GPU backend nothing is pulled (stage 3 of docs/gpu-residency.md): the kernels read
+    // the old crust from the resident buffers, and the CPU reads of the old crust here (cell
+    // plate lists, the samples the location kernel leaves to the CPU, the suture of each
+    // sample) and before (`collide_before_resample`) use only plate and crust type, which no
+    // kernel writes. The host copy of the other fields may be stale until `resample_rebuild`
+    // replaces the crust.
+    let tick = crust.last_changed();
     let crust: &Crust = &crust;
     let table = PlateTable::from_query(&plates);
     let work = &mut *work;
@@ -965,6 +965,7 @@ pub fn resample_interpolate(
     let mut t = Instant::now();
     let on_gpu = gpu.as_mut().is_some_and(|g| {
         run_or_record(g, |g| {
+            g.sync_crust(crust, Some(tick))?;
             crate::gpu::resample_locate::resample_locate_gpu(
                 g,
                 &mesh,
@@ -1007,14 +1008,15 @@ pub fn resample_interpolate(
     }
     let interpolated_on_gpu = gpu.as_mut().is_some_and(|g| {
         run_or_record(g, |g| {
-            crate::gpu::resample_interpolate::resample_interpolate_gpu(
-                g,
-                &mesh,
-                crust,
-                &table,
-                &work.sources,
-                &mut work.next,
-            )
+            g.sync_crust(crust, Some(tick))?;
+            // Located on the device: the sources are read there (only the rechecked ones went
+            // up again); otherwise they go up.
+            let interpolate = if on_gpu {
+                crate::gpu::resample_interpolate::resample_interpolate_gpu_located
+            } else {
+                crate::gpu::resample_interpolate::resample_interpolate_gpu
+            };
+            interpolate(g, &mesh, crust, &table, &work.sources, &mut work.next)
         })
     });
     if !interpolated_on_gpu {
@@ -1060,10 +1062,9 @@ pub fn resample_rebuild(world: &mut World) {
         let mut crust = world.resource_mut::<Crust>();
         std::mem::swap(&mut *crust, &mut next);
     }
-    // The new crust is the host's: whatever the device held newer (pulled before the
-    // interpolation) is superseded.
+    // The new crust is the host's: whatever the device held newer (the interpolation read it
+    // on the device; the old host copy, kept below as a buffer, may be stale) is superseded.
     if let Some(mut g) = world.get_resource_mut::<GpuContext>() {
-        debug_assert!(g.device_newer().is_empty(), "{:?}", g.device_newer());
         g.supersede_device();
     }
     // Keep the old buffers for the next resampling.

@@ -317,15 +317,13 @@ pub fn rift_plate(
         ids.push(id);
     }
     world.resource_mut::<NextPlateId>().0 = next_id;
-    // On the GPU backend the host must hold every field before it writes the crust (the write
-    // makes the next kernel upload the whole host crust).
-    crate::gpu::sync_crust_to_host_or_record(world, crate::gpu::FieldMask::ALL);
-    {
-        let mut crust = world.resource_mut::<Crust>();
+    // Only the plate ids change: on the GPU backend a declared write uploads them (4 B/sample)
+    // instead of pulling every stale field and uploading the whole crust next.
+    crate::gpu::write_crust_fields_or_record(world, crate::gpu::FieldMask::PLATE, |crust| {
         for (&s, &l) in samples.iter().zip(&labels) {
             crust.plate[s as usize] = id_of_label[l as usize];
         }
-    }
+    });
     // Motions: parent's angular velocity plus a divergence away from the parent's centroid.
     let world_from_plate = frame.world_from_plate;
     let omega_parent = motion.euler_pole * motion.angular_speed_rad_per_my;

@@ -599,18 +599,7 @@ impl GpuContext {
                 message: "no crust buffers".into(),
             });
         };
-        self.upload(&b.elevation_km, bytemuck::cast_slice(&crust.elevation_km));
-        self.upload(&b.crust_type, bytemuck::cast_slice(&crust.crust_type));
-        self.upload(&b.age_my, bytemuck::cast_slice(&crust.age_my));
-        self.upload(&b.orogeny, bytemuck::cast_slice(&crust.orogeny));
-        self.upload(
-            &b.orogeny_age_my,
-            bytemuck::cast_slice(&crust.orogeny_age_my),
-        );
-        self.upload(&b.fold_dir, bytemuck::cast_slice(&crust.fold_dir));
-        self.upload(&b.thickness_km, bytemuck::cast_slice(&crust.thickness_km));
-        self.upload(&b.ridge_dir, bytemuck::cast_slice(&crust.ridge_dir));
-        self.upload(&b.plate, bytemuck::cast_slice(&crust.plate));
+        self.upload_fields(&b, crust, FieldMask::EVERY_FIELD);
         self.crust = Some(b);
         self.crust_synced = host_tick;
         self.traffic.crust_uploads += 1;
@@ -646,6 +635,42 @@ impl GpuContext {
             self.pull(crust, FieldMask::ALL)?;
         }
         Ok(())
+    }
+
+    /// Uploads the fields of `fields` of `crust` whole into the resident buffers `b` (the full
+    /// upload of [`Self::sync_crust`] and the declared one of [`Self::note_host_write`]).
+    fn upload_fields(&mut self, b: &CrustBuffers, crust: &Crust, fields: FieldMask) {
+        let has = |f: FieldMask| fields.and(f) == f;
+        if has(FieldMask::ELEVATION) {
+            self.upload(&b.elevation_km, bytemuck::cast_slice(&crust.elevation_km));
+        }
+        if has(FieldMask::AGE) {
+            self.upload(&b.age_my, bytemuck::cast_slice(&crust.age_my));
+        }
+        if has(FieldMask::OROGENY) {
+            self.upload(&b.orogeny, bytemuck::cast_slice(&crust.orogeny));
+        }
+        if has(FieldMask::OROGENY_AGE) {
+            self.upload(
+                &b.orogeny_age_my,
+                bytemuck::cast_slice(&crust.orogeny_age_my),
+            );
+        }
+        if has(FieldMask::FOLD_DIR) {
+            self.upload(&b.fold_dir, bytemuck::cast_slice(&crust.fold_dir));
+        }
+        if has(FieldMask::THICKNESS) {
+            self.upload(&b.thickness_km, bytemuck::cast_slice(&crust.thickness_km));
+        }
+        if has(FieldMask::RIDGE_DIR) {
+            self.upload(&b.ridge_dir, bytemuck::cast_slice(&crust.ridge_dir));
+        }
+        if has(FieldMask::PLATE) {
+            self.upload(&b.plate, bytemuck::cast_slice(&crust.plate));
+        }
+        if has(FieldMask::CRUST_TYPE) {
+            self.upload(&b.crust_type, bytemuck::cast_slice(&crust.crust_type));
+        }
     }
 
     /// Marks `fields` newer on the device (a kernel wrote them) and pulls them into `crust` at
@@ -693,37 +718,7 @@ impl GpuContext {
                 message,
             });
         }
-        let has = |f: FieldMask| fields.and(f) == f;
-        if has(FieldMask::ELEVATION) {
-            self.upload(&b.elevation_km, bytemuck::cast_slice(&crust.elevation_km));
-        }
-        if has(FieldMask::AGE) {
-            self.upload(&b.age_my, bytemuck::cast_slice(&crust.age_my));
-        }
-        if has(FieldMask::OROGENY) {
-            self.upload(&b.orogeny, bytemuck::cast_slice(&crust.orogeny));
-        }
-        if has(FieldMask::OROGENY_AGE) {
-            self.upload(
-                &b.orogeny_age_my,
-                bytemuck::cast_slice(&crust.orogeny_age_my),
-            );
-        }
-        if has(FieldMask::FOLD_DIR) {
-            self.upload(&b.fold_dir, bytemuck::cast_slice(&crust.fold_dir));
-        }
-        if has(FieldMask::THICKNESS) {
-            self.upload(&b.thickness_km, bytemuck::cast_slice(&crust.thickness_km));
-        }
-        if has(FieldMask::RIDGE_DIR) {
-            self.upload(&b.ridge_dir, bytemuck::cast_slice(&crust.ridge_dir));
-        }
-        if has(FieldMask::PLATE) {
-            self.upload(&b.plate, bytemuck::cast_slice(&crust.plate));
-        }
-        if has(FieldMask::CRUST_TYPE) {
-            self.upload(&b.crust_type, bytemuck::cast_slice(&crust.crust_type));
-        }
+        self.upload_fields(&b, crust, fields);
         self.crust = Some(b);
         self.crust_synced = Some(after);
         self.check("crust field upload")

@@ -7,10 +7,10 @@
 
 use std::path::PathBuf;
 
-use tectonic_planets::contrib::{Edifice, Hotspot};
 use tectonic_planets::geometry::to_lat_lon_deg;
 use tectonic_planets::io::maps::{Raster, write_all_maps};
 use tectonic_planets::io::summary::CrustSampler;
+use tectonic_planets::plugins::hotspots::{Edifice, Hotspot};
 use tectonic_planets::prelude::*;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

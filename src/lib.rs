@@ -9,7 +9,6 @@
 pub mod amplify;
 pub mod commands;
 pub mod components;
-pub mod contrib;
 pub mod geometry;
 pub mod gpu;
 pub mod io;
@@ -36,21 +35,18 @@ pub mod prelude {
         BackendChoice, ComputeBackend, FieldMask, GpuContext, pull_or_record, sync_crust_to_host,
         write_crust_fields,
     };
-    pub use crate::io::params::{ParamError, ParamKind, ParamSpec, ParamValue, Params};
-    pub use crate::io::plugin_params::{
-        PluginConfig, PluginParam, PluginParams, PluginParamsAppExt,
-    };
-    pub use crate::io::save::{SaveAppExt, SaveSection, SectionReader, SectionWriter};
     pub use crate::plugins::{
-        AfterResample, AfterResampleSystems, AgingPlugin, CollisionPlugin, DiagnosticsPlugin,
-        DriftPlugin, ErosionPlugin, OceanicCrustPlugin, PhenomenonAppExt, ResamplePlugin,
-        ResampleSystems, RiftingPlugin, SlabPullPlugin, SubductionPlugin, TectonicPlugins,
-        TectonicStep, TectonicSystems, TerranePlugin,
+        AfterResample, AfterResampleSystems, AgingPlugin, AgingSystems, CollisionPlugin,
+        DiagnosticsPlugin, DriftPlugin, ErosionPlugin, OceanicCrustPlugin, Phenomena, Phenomenon,
+        PhenomenonAppExt, PhenomenonInfo, ResamplePlugin, ResampleSystems, RiftingPlugin,
+        SlabPullPlugin, SubductionPlugin, TectonicPlugins, TectonicStep, TectonicSystems,
+        TerranePlugin, phenomenon_enabled,
     };
     pub use crate::random::{SimRng, hash3, mix64, unit_f64, unit_vector};
     pub use crate::resources::{
-        Crust, CrustType, Orogeny, Phenomena, PhenomenonInfo, ResampleRequest, SimClock,
-        phenomenon_enabled,
+        Crust, CrustType, Orogeny, ParamError, ParamKind, ParamSpec, ParamValue, Params,
+        PluginConfig, PluginParam, PluginParams, PluginParamsAppExt, ResampleRequest, SaveAppExt,
+        SaveSection, SectionError, SectionReader, SectionWriter, SimClock,
     };
     pub use crate::simulation::{SimError, Simulation};
     pub use bevy_app::{App, Plugin, PluginGroup};

@@ -10,11 +10,11 @@ use tectonic_planets::Simulation;
 use tectonic_planets::commands::{Command as Cmd, Outcome, Script};
 use tectonic_planets::gpu::{BackendChoice, ComputeBackend, GpuContext};
 use tectonic_planets::io::maps::{Raster, write_all_maps};
-use tectonic_planets::io::params::{ParamValue, Params};
-use tectonic_planets::io::plugin_params::PluginConfig;
 use tectonic_planets::io::save::{self, CommandHistory};
 use tectonic_planets::io::summary::{CrustSampler, summarize};
 use tectonic_planets::plugins::TectonicSystems;
+use tectonic_planets::resources::params::{ParamValue, Params};
+use tectonic_planets::resources::plugin_params::PluginConfig;
 
 #[derive(Parser)]
 #[command(

@@ -302,7 +302,9 @@ fn plugins_are_listed_switched_and_configured() {
     assert!(on("hotspots") && !on("erosion"));
     assert_eq!(
         sim.plugin_params().get("plugins.hotspots.radius_km"),
-        Some(tectonic_planets::io::params::ParamValue::Float(600.0))
+        Some(tectonic_planets::resources::params::ParamValue::Float(
+            600.0
+        ))
     );
     let _ = std::fs::remove_dir_all(&dir);
 }

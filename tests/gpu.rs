@@ -9,25 +9,22 @@ use common::{fresh_seed, gpu_or_skip};
 
 use std::path::PathBuf;
 
-use tectonic_planets::gpu::aging::{aging_cpu, aging_dispatch};
-use tectonic_planets::gpu::collision_uplift::{
-    CollisionSurge, collision_uplift_cpu, collision_uplift_gpu,
-};
+use tectonic_planets::gpu::aging::aging_dispatch;
+use tectonic_planets::gpu::collision_uplift::{CollisionSurge, collision_uplift_gpu};
 use tectonic_planets::gpu::crust_gather::{crust_gather_cpu, crust_gather_gpu};
 use tectonic_planets::gpu::crust_reduce::{
     crust_reduce_cpu, crust_reduce_gpu, stats_from_reduction,
 };
-use tectonic_planets::gpu::erosion::{ErosionRates, erosion_cpu, erosion_dispatch};
+use tectonic_planets::gpu::erosion::{ErosionRates, erosion_dispatch};
 use tectonic_planets::gpu::resample_interpolate::{
-    resample_interpolate_cpu, resample_interpolate_gpu, resample_interpolate_gpu_located,
+    resample_interpolate_gpu, resample_interpolate_gpu_located,
 };
 use tectonic_planets::gpu::resample_locate::{
-    CellPlates, OverlapRules, SampleSource, resample_locate_cpu, resample_locate_gpu,
-    resample_locate_raw,
+    CellPlates, OverlapRules, SampleSource, resample_locate_raw,
 };
 use tectonic_planets::gpu::sources_patch::{sources_patch_cpu, sources_patch_gpu};
 use tectonic_planets::gpu::subduction_uplift::{
-    UpliftConstants, read_back, subduction_uplift_cpu, subduction_uplift_dispatch,
+    UpliftConstants, read_back, subduction_uplift_dispatch,
 };
 use tectonic_planets::gpu::{
     BackendChoice, FieldMask, GpuContext, GpuError, pull_or_record, shader_source,
@@ -36,7 +33,15 @@ use tectonic_planets::prelude::*;
 use tectonic_planets::random::SimRng;
 use tectonic_planets::resources::convergence::NONE;
 use tectonic_planets::resources::{ConvergenceField, FrontPoints, PlateTable};
-use tectonic_planets::systems::resample::{interpolate, plate_geometry};
+// The CPU references live with the systems that run them.
+use tectonic_planets::systems::aging::aging_cpu;
+use tectonic_planets::systems::convergence::collision::collision_uplift_cpu;
+use tectonic_planets::systems::convergence::subduction::subduction_uplift_cpu;
+use tectonic_planets::systems::erosion::erosion_cpu;
+use tectonic_planets::systems::resample::{
+    interpolate, interpolate as resample_interpolate_cpu, plate_geometry, resample_locate_cpu,
+    resample_locate_gpu,
+};
 
 fn shader_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("shaders")

@@ -6,8 +6,8 @@ mod common;
 
 use std::path::Path;
 
-use tectonic_planets::contrib::{Edifice, Hotspot, HotspotPlugin};
 use tectonic_planets::io::save;
+use tectonic_planets::plugins::hotspots::{Edifice, Hotspot, HotspotPlugin};
 use tectonic_planets::prelude::*;
 
 /// Edifices with their world position, sorted by serial.
@@ -297,7 +297,7 @@ fn old_saves_load_with_hotspots_off_and_default_parameters() {
 
 #[test]
 fn the_hotspot_plugin_imports_only_the_prelude() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/contrib/hotspots.rs");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/plugins/hotspots.rs");
     let source = std::fs::read_to_string(&path).unwrap();
     let mut prelude_imports = 0;
     for (k, line) in source.lines().enumerate() {

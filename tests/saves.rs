@@ -171,12 +171,12 @@ fn count(mut c: ResMut<Counter>) {
     c.0 += 3;
 }
 
-fn save_counter(world: &mut World, w: &mut SectionWriter) -> Result<(), String> {
+fn save_counter(world: &mut World, w: &mut SectionWriter) -> Result<(), SectionError> {
     w.u64(world.resource::<Counter>().0);
     Ok(())
 }
 
-fn load_counter(world: &mut World, r: &mut SectionReader, _v: u32) -> Result<(), String> {
+fn load_counter(world: &mut World, r: &mut SectionReader, _v: u32) -> Result<(), SectionError> {
     let v = r.u64()?;
     r.finish()?;
     world.resource_mut::<Counter>().0 = v;

@@ -27,7 +27,7 @@
 //! the tiling or the thread count. Arithmetic is in `f32` so that `shaders/amplify.wgsl` can
 //! mirror it line for line (keep both in sync).
 
-use bytemuck::{Pod, Zeroable};
+pub use crate::gpu::amplify::{AmplifyQuery, AmplifyUniform, AmplifyVertex};
 
 /// Crust sample kind: oceanic crust.
 pub const KIND_OCEAN: u32 = 0;
@@ -42,75 +42,6 @@ pub const KIND_HIMALAYAN: u32 = 3;
 /// amplified elevation always lies within the crust's range widened by this much, which lets
 /// 16-bit exports fix their grey scale before the first row is computed.
 pub const MAX_RELIEF_M: f32 = 4000.0;
-
-/// One crust sample as the amplification reads it. Keep in sync with `shaders/amplify.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct AmplifyVertex {
-    /// Unit position, world frame.
-    pub px: f32,
-    /// See `px`.
-    pub py: f32,
-    /// See `px`.
-    pub pz: f32,
-    /// Unit tangent along the grain (ridge or fold direction), world frame.
-    pub ax: f32,
-    /// See `ax`.
-    pub ay: f32,
-    /// See `ax`.
-    pub az: f32,
-    /// Crust elevation, metres.
-    pub elevation_m: f32,
-    /// Oceanic age (oceanic crust) or orogeny age (continental crust), My.
-    pub age_my: f32,
-    /// Random offset of the primitive along the grain, km.
-    pub offset_x_km: f32,
-    /// Random offset of the primitive across the grain, km.
-    pub offset_y_km: f32,
-    /// One of the `KIND_*` constants.
-    pub kind: u32,
-    /// Exemplar index + 1, or 0 for procedural relief (CPU only; the shader ignores it).
-    pub exemplar: u32,
-}
-
-/// One point to amplify: its direction and the triangle around it. Keep in sync with
-/// `shaders/amplify.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct AmplifyQuery {
-    /// Unit direction of the point, world frame.
-    pub dx: f32,
-    /// See `dx`.
-    pub dy: f32,
-    /// See `dx`.
-    pub dz: f32,
-    /// Vertex indices of the containing triangle.
-    pub c0: u32,
-    /// See `c0`.
-    pub c1: u32,
-    /// See `c0`.
-    pub c2: u32,
-    /// Barycentric weights of `c0`, `c1`, `c2` (sum 1).
-    pub w0: f32,
-    /// See `w0`.
-    pub w1: f32,
-    /// See `w0`.
-    pub w2: f32,
-}
-
-/// Global constants of one amplification. Keep in sync with `shaders/amplify.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct AmplifyUniform {
-    /// Planet radius, km.
-    pub radius_km: f32,
-    /// Seed of the noise (32 bits of the planet seed, mixed).
-    pub seed: u32,
-    /// Multiplies all relief (1 = the model's amplitudes).
-    pub relief_scale: f32,
-    /// Number of queries (the shader's bound check).
-    pub count: u32,
-}
 
 // Relief constants (metres, km, My). Keep in sync with shaders/amplify.wgsl.
 const OCEAN_HILL_WAVELENGTH_KM: f32 = 5.0;

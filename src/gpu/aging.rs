@@ -2,8 +2,9 @@
 //! resident buffers. The CPU reference is [`aging_cpu`] (the function the CPU backend runs, in
 //! `src/systems/aging.rs`); both do the same f32 additions, so they agree bit for bit.
 
-use crate::gpu::{GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer};
-pub use crate::systems::aging::aging_cpu;
+use crate::gpu::{
+    GpuContext, GpuError, Kernel, ROW_STRIDE, compute_pipeline, entry, uniform_buffer,
+};
 
 /// The kernel's WGSL.
 pub const WGSL: &str = include_str!("../../shaders/aging.wgsl");
@@ -29,8 +30,8 @@ pub(crate) struct AgingKernel {
     bind_group: Option<wgpu::BindGroup>,
 }
 
-impl AgingKernel {
-    pub(crate) fn new(device: &wgpu::Device) -> Self {
+impl Kernel for AgingKernel {
+    fn new(device: &wgpu::Device) -> Self {
         Self {
             pipeline: compute_pipeline(device, "aging", WGSL),
             uniforms: uniform_buffer(
@@ -41,7 +42,7 @@ impl AgingKernel {
             bind_group: None,
         }
     }
-    pub(crate) fn forget_bind_group(&mut self) {
+    fn forget_bind_groups(&mut self) {
         self.bind_group = None;
     }
 }
@@ -49,36 +50,38 @@ impl AgingKernel {
 /// One aging step of `dt_my` on the resident crust buffers (call [`GpuContext::sync_crust`]
 /// first).
 pub fn aging_dispatch(ctx: &mut GpuContext, dt_my: f32) -> Result<(), GpuError> {
-    let Some(b) = ctx.crust_buffers() else {
-        return Err(GpuError::Kernel {
-            kernel: "aging",
-            message: "the crust is not on the device".into(),
-        });
-    };
-    let n = b.len as u32;
-    if ctx.aging.bind_group.is_none() {
-        let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("aging bindings"),
-            layout: &ctx.aging.pipeline.get_bind_group_layout(0),
-            entries: &[
-                entry(0, &ctx.aging.uniforms),
-                entry(1, &b.age_my),
-                entry(2, &b.orogeny_age_my),
-                entry(3, &b.orogeny),
-            ],
-        });
-        ctx.aging.bind_group = Some(bg);
-    }
-    let u = AgingUniforms {
-        dt_my,
-        count: n,
-        row_stride: ROW_STRIDE,
-        _pad: 0,
-    };
-    let (pipeline, uniforms) = (ctx.aging.pipeline.clone(), ctx.aging.uniforms.clone());
-    ctx.upload(&uniforms, bytemuck::bytes_of(&u));
-    let Some(bg) = ctx.aging.bind_group.clone() else {
-        return Ok(());
-    };
-    ctx.dispatch("aging", &pipeline, &bg, n)
+    ctx.with_kernel(|ctx, k: &mut AgingKernel| {
+        let Some(b) = ctx.crust_buffers() else {
+            return Err(GpuError::Kernel {
+                kernel: "aging",
+                message: "the crust is not on the device".into(),
+            });
+        };
+        let n = b.len as u32;
+        if k.bind_group.is_none() {
+            let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("aging bindings"),
+                layout: &k.pipeline.get_bind_group_layout(0),
+                entries: &[
+                    entry(0, &k.uniforms),
+                    entry(1, &b.age_my),
+                    entry(2, &b.orogeny_age_my),
+                    entry(3, &b.orogeny),
+                ],
+            });
+            k.bind_group = Some(bg);
+        }
+        let u = AgingUniforms {
+            dt_my,
+            count: n,
+            row_stride: ROW_STRIDE,
+            _pad: 0,
+        };
+        let (pipeline, uniforms) = (k.pipeline.clone(), k.uniforms.clone());
+        ctx.upload(&uniforms, bytemuck::bytes_of(&u));
+        let Some(bg) = k.bind_group.clone() else {
+            return Ok(());
+        };
+        ctx.dispatch("aging", &pipeline, &bg, n)
+    })
 }

@@ -9,11 +9,81 @@
 //! size stream through buffers of fixed size. Exemplar primitives are CPU only: the shader
 //! ignores the `exemplar` field.
 
-pub use crate::amplify::procedural::{AmplifyQuery, AmplifyUniform, AmplifyVertex, amplify_cpu};
+use bytemuck::{Pod, Zeroable};
+
 use crate::gpu::{GpuContext, GpuError, compute_pipeline, entry, uniform_buffer};
 
 /// The kernel's WGSL.
 pub const WGSL: &str = include_str!("../../shaders/amplify.wgsl");
+
+/// One crust sample as the amplification reads it. Keep in sync with `shaders/amplify.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct AmplifyVertex {
+    /// Unit position, world frame.
+    pub px: f32,
+    /// See `px`.
+    pub py: f32,
+    /// See `px`.
+    pub pz: f32,
+    /// Unit tangent along the grain (ridge or fold direction), world frame.
+    pub ax: f32,
+    /// See `ax`.
+    pub ay: f32,
+    /// See `ax`.
+    pub az: f32,
+    /// Crust elevation, metres.
+    pub elevation_m: f32,
+    /// Oceanic age (oceanic crust) or orogeny age (continental crust), My.
+    pub age_my: f32,
+    /// Random offset of the primitive along the grain, km.
+    pub offset_x_km: f32,
+    /// Random offset of the primitive across the grain, km.
+    pub offset_y_km: f32,
+    /// One of the `KIND_*` constants.
+    pub kind: u32,
+    /// Exemplar index + 1, or 0 for procedural relief (CPU only; the shader ignores it).
+    pub exemplar: u32,
+}
+
+/// One point to amplify: its direction and the triangle around it. Keep in sync with
+/// `shaders/amplify.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct AmplifyQuery {
+    /// Unit direction of the point, world frame.
+    pub dx: f32,
+    /// See `dx`.
+    pub dy: f32,
+    /// See `dx`.
+    pub dz: f32,
+    /// Vertex indices of the containing triangle.
+    pub c0: u32,
+    /// See `c0`.
+    pub c1: u32,
+    /// See `c0`.
+    pub c2: u32,
+    /// Barycentric weights of `c0`, `c1`, `c2` (sum 1).
+    pub w0: f32,
+    /// See `w0`.
+    pub w1: f32,
+    /// See `w0`.
+    pub w2: f32,
+}
+
+/// Global constants of one amplification. Keep in sync with `shaders/amplify.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct AmplifyUniform {
+    /// Planet radius, km.
+    pub radius_km: f32,
+    /// Seed of the noise (32 bits of the planet seed, mixed).
+    pub seed: u32,
+    /// Multiplies all relief (1 = the model's amplitudes).
+    pub relief_scale: f32,
+    /// Number of queries (the shader's bound check).
+    pub count: u32,
+}
 
 /// Threads per workgroup of the kernel (`@workgroup_size` in shaders/amplify.wgsl).
 pub const AMPLIFY_WORKGROUP_SIZE: u32 = 64;
@@ -145,8 +215,9 @@ impl AmplifyGpu {
             });
         }
         if self.vertex_count == 0 {
-            // No crust: every corner is skipped, as on the CPU (the device table is a dummy).
-            amplify_cpu(&self.uniform, &[], queries, out);
+            // No crust: every corner is skipped, so the relief and the base are zero, as
+            // `amplify_cpu` gives with no vertices (the device table is a dummy).
+            out[..queries.len()].fill(0.0);
             return Ok(());
         }
         for (q, o) in queries.chunks(self.chunk).zip(out.chunks_mut(self.chunk)) {

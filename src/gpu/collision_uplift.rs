@@ -13,13 +13,27 @@
 use glam::DVec3;
 
 use crate::gpu::{
-    FieldMask, GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer,
+    FieldMask, GpuContext, GpuError, Kernel, ROW_STRIDE, compute_pipeline, entry, uniform_buffer,
 };
 use crate::resources::Crust;
-pub use crate::systems::convergence::{CollisionSurge, collision_uplift_cpu};
 
 /// The kernel's WGSL.
 pub const WGSL: &str = include_str!("../../shaders/collision_uplift.wgsl");
+
+/// One sutured terrane's collision surge (see the module documentation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CollisionSurge {
+    /// r: radius of the surge, km.
+    pub radius_km: f64,
+    /// Δz₀: uplift at the terrane, km.
+    pub peak_km: f64,
+    /// Planet radius, km.
+    pub planet_radius_km: f64,
+    /// z_c: elevations are capped here, km.
+    pub max_elevation_km: f64,
+    /// The terrane's centroid (world frame, unit vector); fold directions point away from it.
+    pub centroid: DVec3,
+}
 
 const KERNEL: &str = "collision_uplift";
 
@@ -78,8 +92,8 @@ pub(crate) struct CollisionKernel {
     bind_group: Option<wgpu::BindGroup>,
 }
 
-impl CollisionKernel {
-    pub(crate) fn new(device: &wgpu::Device) -> Self {
+impl Kernel for CollisionKernel {
+    fn new(device: &wgpu::Device) -> Self {
         Self {
             pipeline: compute_pipeline(device, KERNEL, WGSL),
             uniforms: uniform_buffer(
@@ -92,7 +106,7 @@ impl CollisionKernel {
             bind_group: None,
         }
     }
-    pub(crate) fn forget_bind_group(&mut self) {
+    fn forget_bind_groups(&mut self) {
         self.bind_group = None;
     }
 }
@@ -121,83 +135,78 @@ pub fn collision_uplift_gpu(
     positions: &[DVec3],
     surges: &[(CollisionSurge, Vec<f32>)],
 ) -> Result<(), GpuError> {
-    let Some(n) = ctx.crust_buffers().map(|b| b.len) else {
-        return Err(fail("the crust is not on the device".into()));
-    };
-    if positions.len() != n {
-        return Err(fail(format!(
-            "{} positions for a crust of {n} samples",
-            positions.len()
-        )));
-    }
-    if let Some((_, d)) = surges.iter().find(|(_, d)| d.len() != n) {
-        return Err(fail(format!(
-            "{} distances for a crust of {n} samples",
-            d.len()
-        )));
-    }
-    if surges.is_empty() {
-        return Ok(());
-    }
-    let key = mesh_key(positions);
-    if ctx.collision.positions.as_ref().is_none_or(|p| p.1 != key) {
-        let flat: Vec<f32> = positions
-            .iter()
-            .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
-            .collect();
-        let buf = ctx.storage_buffer("collision_uplift positions", 4 * flat.len());
-        ctx.upload(&buf, bytemuck::cast_slice(&flat));
-        ctx.collision.positions = Some((buf, key));
-        ctx.collision.bind_group = None;
-    }
-    if ctx.collision.dist.as_ref().is_none_or(|d| d.1 != n) {
-        let buf = ctx.storage_buffer("collision_uplift distances", 4 * n);
-        ctx.collision.dist = Some((buf, n));
-        ctx.collision.bind_group = None;
-    }
-    if ctx.collision.bind_group.is_none() {
-        let (Some(b), Some((pb, _)), Some((db, _))) = (
-            ctx.crust_buffers(),
-            ctx.collision.positions.as_ref(),
-            ctx.collision.dist.as_ref(),
-        ) else {
+    ctx.with_kernel(|ctx, k: &mut CollisionKernel| {
+        let Some(n) = ctx.crust_buffers().map(|b| b.len) else {
+            return Err(fail("the crust is not on the device".into()));
+        };
+        if positions.len() != n {
+            return Err(fail(format!(
+                "{} positions for a crust of {n} samples",
+                positions.len()
+            )));
+        }
+        if let Some((_, d)) = surges.iter().find(|(_, d)| d.len() != n) {
+            return Err(fail(format!(
+                "{} distances for a crust of {n} samples",
+                d.len()
+            )));
+        }
+        if surges.is_empty() {
+            return Ok(());
+        }
+        let key = mesh_key(positions);
+        if k.positions.as_ref().is_none_or(|p| p.1 != key) {
+            let flat: Vec<f32> = positions
+                .iter()
+                .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+                .collect();
+            let buf = ctx.storage_buffer("collision_uplift positions", 4 * flat.len());
+            ctx.upload(&buf, bytemuck::cast_slice(&flat));
+            k.positions = Some((buf, key));
+            k.bind_group = None;
+        }
+        if k.dist.as_ref().is_none_or(|d| d.1 != n) {
+            let buf = ctx.storage_buffer("collision_uplift distances", 4 * n);
+            k.dist = Some((buf, n));
+            k.bind_group = None;
+        }
+        if k.bind_group.is_none() {
+            let (Some(b), Some((pb, _)), Some((db, _))) =
+                (ctx.crust_buffers(), k.positions.as_ref(), k.dist.as_ref())
+            else {
+                return Err(fail("buffers missing".into()));
+            };
+            let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("collision_uplift bindings"),
+                layout: &k.pipeline.get_bind_group_layout(0),
+                entries: &[
+                    entry(0, &k.uniforms),
+                    entry(1, &b.elevation_km),
+                    entry(2, &b.orogeny),
+                    entry(3, &b.orogeny_age_my),
+                    entry(4, &b.fold_dir),
+                    entry(5, &b.crust_type),
+                    entry(6, pb),
+                    entry(7, db),
+                ],
+            });
+            k.bind_group = Some(bg);
+        }
+        let (pipeline, uniforms) = (k.pipeline.clone(), k.uniforms.clone());
+        let (Some(bg), Some((dist, _))) = (k.bind_group.clone(), k.dist.clone()) else {
             return Err(fail("buffers missing".into()));
         };
-        let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("collision_uplift bindings"),
-            layout: &ctx.collision.pipeline.get_bind_group_layout(0),
-            entries: &[
-                entry(0, &ctx.collision.uniforms),
-                entry(1, &b.elevation_km),
-                entry(2, &b.orogeny),
-                entry(3, &b.orogeny_age_my),
-                entry(4, &b.fold_dir),
-                entry(5, &b.crust_type),
-                entry(6, pb),
-                entry(7, db),
-            ],
-        });
-        ctx.collision.bind_group = Some(bg);
-    }
-    let (pipeline, uniforms) = (
-        ctx.collision.pipeline.clone(),
-        ctx.collision.uniforms.clone(),
-    );
-    let (Some(bg), Some((dist, _))) =
-        (ctx.collision.bind_group.clone(), ctx.collision.dist.clone())
-    else {
-        return Err(fail("buffers missing".into()));
-    };
-    // Writes to the distances and uniforms are ordered before the next submission, so one
-    // buffer of each serves every surge.
-    for (s, d) in surges {
-        let u = CollisionUniforms::new(s, n as u32);
-        ctx.upload(&uniforms, bytemuck::bytes_of(&u));
-        ctx.upload(&dist, bytemuck::cast_slice(d));
-        ctx.dispatch(KERNEL, &pipeline, &bg, (n as u32).div_ceil(4))?;
-        ctx.traffic.collision_surges += 1;
-    }
-    Ok(())
+        // Writes to the distances and uniforms are ordered before the next submission, so one
+        // buffer of each serves every surge.
+        for (s, d) in surges {
+            let u = CollisionUniforms::new(s, n as u32);
+            ctx.upload(&uniforms, bytemuck::bytes_of(&u));
+            ctx.upload(&dist, bytemuck::cast_slice(d));
+            ctx.dispatch(KERNEL, &pipeline, &bg, (n as u32).div_ceil(4))?;
+            ctx.traffic.collision_surges += 1;
+        }
+        Ok(())
+    })
 }
 
 /// The fields the kernel writes on the device: elevation, orogeny, orogeny age, fold direction.

@@ -4,7 +4,9 @@
 //! [`crust_gather_cpu`] (indexing the host array); the kernel copies raw 32-bit words, so both
 //! agree bit for bit.
 
-use crate::gpu::{GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer};
+use crate::gpu::{
+    GpuContext, GpuError, Kernel, ROW_STRIDE, compute_pipeline, entry, uniform_buffer,
+};
 
 /// The kernel's WGSL.
 pub const WGSL: &str = include_str!("../../shaders/crust_gather.wgsl");
@@ -31,8 +33,8 @@ pub(crate) struct GatherKernel {
     bind_group: Option<wgpu::BindGroup>,
 }
 
-impl GatherKernel {
-    pub(crate) fn new(device: &wgpu::Device) -> Self {
+impl Kernel for GatherKernel {
+    fn new(device: &wgpu::Device) -> Self {
         Self {
             pipeline: compute_pipeline(device, "crust_gather", WGSL),
             uniforms: uniform_buffer(
@@ -44,7 +46,7 @@ impl GatherKernel {
             bind_group: None,
         }
     }
-    pub(crate) fn forget_bind_group(&mut self) {
+    fn forget_bind_groups(&mut self) {
         self.bind_group = None;
     }
 }
@@ -57,69 +59,66 @@ pub fn crust_gather_cpu(elevation_km: &[f32], index: &[u32]) -> Vec<f32> {
 /// The resident elevation at `index` (call [`GpuContext::sync_crust`] first). Indices must be
 /// below the crust's sample count.
 pub fn crust_gather_gpu(ctx: &mut GpuContext, index: &[u32]) -> Result<Vec<f32>, GpuError> {
-    const KERNEL: &str = "crust_gather";
-    let Some(b) = ctx.crust_buffers() else {
-        return Err(GpuError::Kernel {
-            kernel: KERNEL,
-            message: "the crust is not on the device".into(),
-        });
-    };
-    let (n, elevation) = (b.len, b.elevation_km.clone());
-    if let Some(&bad) = index.iter().find(|&&i| i as usize >= n) {
-        return Err(GpuError::Kernel {
-            kernel: KERNEL,
-            message: format!("index {bad} out of {n} samples"),
-        });
-    }
-    let m = index.len();
-    if m == 0 {
-        return Ok(Vec::new());
-    }
-    if ctx
-        .gather
-        .buffers
-        .as_ref()
-        .is_none_or(|(cap, _, _)| *cap < m)
-    {
-        let cap = m.next_power_of_two();
-        let idx = ctx.storage_buffer("crust_gather index", 4 * cap);
-        let out = ctx.storage_buffer("crust_gather elevation out", 4 * cap);
-        ctx.gather.buffers = Some((cap, idx, out));
-        ctx.gather.bind_group = None;
-    }
-    let Some((_, idx, out)) = ctx.gather.buffers.clone() else {
-        return Err(GpuError::Kernel {
-            kernel: KERNEL,
-            message: "no buffers".into(),
-        });
-    };
-    if ctx.gather.bind_group.is_none() {
-        let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("crust_gather bindings"),
-            layout: &ctx.gather.pipeline.get_bind_group_layout(0),
-            entries: &[
-                entry(0, &ctx.gather.uniforms),
-                entry(1, &elevation),
-                entry(2, &idx),
-                entry(3, &out),
-            ],
-        });
-        ctx.gather.bind_group = Some(bg);
-    }
-    let u = GatherUniforms {
-        count: m as u32,
-        samples: n as u32,
-        row_stride: ROW_STRIDE,
-        _pad: 0,
-    };
-    let (pipeline, uniforms) = (ctx.gather.pipeline.clone(), ctx.gather.uniforms.clone());
-    ctx.upload(&uniforms, bytemuck::bytes_of(&u));
-    ctx.upload(&idx, bytemuck::cast_slice(index));
-    let Some(bg) = ctx.gather.bind_group.clone() else {
-        return Ok(Vec::new());
-    };
-    ctx.dispatch(KERNEL, &pipeline, &bg, m as u32)?;
-    let mut z = vec![f32::NAN; m];
-    ctx.download(KERNEL, &out, bytemuck::cast_slice_mut(&mut z))?;
-    Ok(z)
+    ctx.with_kernel(|ctx, k: &mut GatherKernel| {
+        const KERNEL: &str = "crust_gather";
+        let Some(b) = ctx.crust_buffers() else {
+            return Err(GpuError::Kernel {
+                kernel: KERNEL,
+                message: "the crust is not on the device".into(),
+            });
+        };
+        let (n, elevation) = (b.len, b.elevation_km.clone());
+        if let Some(&bad) = index.iter().find(|&&i| i as usize >= n) {
+            return Err(GpuError::Kernel {
+                kernel: KERNEL,
+                message: format!("index {bad} out of {n} samples"),
+            });
+        }
+        let m = index.len();
+        if m == 0 {
+            return Ok(Vec::new());
+        }
+        if k.buffers.as_ref().is_none_or(|(cap, _, _)| *cap < m) {
+            let cap = m.next_power_of_two();
+            let idx = ctx.storage_buffer("crust_gather index", 4 * cap);
+            let out = ctx.storage_buffer("crust_gather elevation out", 4 * cap);
+            k.buffers = Some((cap, idx, out));
+            k.bind_group = None;
+        }
+        let Some((_, idx, out)) = k.buffers.clone() else {
+            return Err(GpuError::Kernel {
+                kernel: KERNEL,
+                message: "no buffers".into(),
+            });
+        };
+        if k.bind_group.is_none() {
+            let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("crust_gather bindings"),
+                layout: &k.pipeline.get_bind_group_layout(0),
+                entries: &[
+                    entry(0, &k.uniforms),
+                    entry(1, &elevation),
+                    entry(2, &idx),
+                    entry(3, &out),
+                ],
+            });
+            k.bind_group = Some(bg);
+        }
+        let u = GatherUniforms {
+            count: m as u32,
+            samples: n as u32,
+            row_stride: ROW_STRIDE,
+            _pad: 0,
+        };
+        let (pipeline, uniforms) = (k.pipeline.clone(), k.uniforms.clone());
+        ctx.upload(&uniforms, bytemuck::bytes_of(&u));
+        ctx.upload(&idx, bytemuck::cast_slice(index));
+        let Some(bg) = k.bind_group.clone() else {
+            return Ok(Vec::new());
+        };
+        ctx.dispatch(KERNEL, &pipeline, &bg, m as u32)?;
+        let mut z = vec![f32::NAN; m];
+        ctx.download(KERNEL, &out, bytemuck::cast_slice_mut(&mut z))?;
+        Ok(z)
+    })
 }

@@ -13,9 +13,13 @@
 use rayon::prelude::*;
 
 use crate::geometry::SphereMesh;
-use crate::gpu::{GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer};
+use crate::gpu::{
+    GpuContext, GpuError, Kernel, ROW_STRIDE, compute_pipeline, entry, uniform_buffer,
+};
 use crate::resources::{CrustStats, CrustType};
-use crate::systems::diagnostics::REDUCE_CHUNK;
+
+/// Chunk size of deterministic reductions.
+pub const REDUCE_CHUNK: usize = 8192;
 
 /// The kernel's WGSL.
 pub const WGSL: &str = include_str!("../../shaders/crust_reduce.wgsl");
@@ -137,8 +141,8 @@ pub(crate) struct ReduceKernel {
     bind_group: Option<wgpu::BindGroup>,
 }
 
-impl ReduceKernel {
-    pub(crate) fn new(device: &wgpu::Device) -> Self {
+impl Kernel for ReduceKernel {
+    fn new(device: &wgpu::Device) -> Self {
         Self {
             pipeline: compute_pipeline(device, "crust_reduce", WGSL),
             uniforms: uniform_buffer(
@@ -150,7 +154,7 @@ impl ReduceKernel {
             bind_group: None,
         }
     }
-    pub(crate) fn forget_bind_group(&mut self) {
+    fn forget_bind_groups(&mut self) {
         self.bind_group = None;
     }
 }
@@ -175,85 +179,82 @@ fn to_ordered(x: f32) -> u32 {
 /// Runs the reduction on the resident crust (call [`GpuContext::sync_crust`] first); reads back
 /// 24 bytes plus one word per 32 samples.
 pub fn crust_reduce_gpu(ctx: &mut GpuContext) -> Result<CrustReduction, GpuError> {
-    const KERNEL: &str = "crust_reduce";
-    let Some(b) = ctx.crust_buffers() else {
-        return Err(GpuError::Kernel {
-            kernel: KERNEL,
-            message: "the crust is not on the device".into(),
-        });
-    };
-    let n = b.len;
-    let bufs = [
-        b.elevation_km.clone(),
-        b.age_my.clone(),
-        b.orogeny_age_my.clone(),
-        b.fold_dir.clone(),
-    ];
-    let words = n.div_ceil(32);
-    let len = HEADER_WORDS + words;
-    if ctx
-        .reduce
-        .output
-        .as_ref()
-        .is_none_or(|(cap, _)| *cap != len)
-    {
-        let out = ctx.storage_buffer("crust_reduce output", 4 * len);
-        ctx.reduce.output = Some((len, out));
-        ctx.reduce.bind_group = None;
-    }
-    let Some((_, out)) = ctx.reduce.output.clone() else {
-        return Err(GpuError::Kernel {
-            kernel: KERNEL,
-            message: "no output buffer".into(),
-        });
-    };
-    if ctx.reduce.bind_group.is_none() {
-        let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("crust_reduce bindings"),
-            layout: &ctx.reduce.pipeline.get_bind_group_layout(0),
-            entries: &[
-                entry(0, &ctx.reduce.uniforms),
-                entry(1, &bufs[0]),
-                entry(2, &bufs[1]),
-                entry(3, &bufs[2]),
-                entry(4, &bufs[3]),
-                entry(5, &out),
-            ],
-        });
-        ctx.reduce.bind_group = Some(bg);
-    }
-    let u = ReduceUniforms {
-        count: n as u32,
-        words: words as u32,
-        row_stride: ROW_STRIDE,
-        _pad: 0,
-    };
-    let header: [u32; HEADER_WORDS] = [
-        to_ordered(f32::INFINITY),
-        to_ordered(f32::NEG_INFINITY),
-        NO_INDEX,
-        NO_INDEX,
-        NO_INDEX,
-        NO_INDEX,
-    ];
-    let (pipeline, uniforms) = (ctx.reduce.pipeline.clone(), ctx.reduce.uniforms.clone());
-    ctx.upload(&uniforms, bytemuck::bytes_of(&u));
-    ctx.upload(&out, bytemuck::cast_slice(&header));
-    let Some(bg) = ctx.reduce.bind_group.clone() else {
-        return Err(GpuError::Kernel {
-            kernel: KERNEL,
-            message: "no bind group".into(),
-        });
-    };
-    ctx.dispatch(KERNEL, &pipeline, &bg, words as u32)?;
-    // Poisoned: a readback that copies nothing cannot pass for a result.
-    let mut raw = vec![0xdead_beef_u32; len];
-    ctx.download(KERNEL, &out, bytemuck::cast_slice_mut(&mut raw))?;
-    let first = |w: u32| (w != NO_INDEX).then_some(w as usize);
-    Ok(CrustReduction {
-        min_elevation_km: from_ordered(raw[0]),
-        max_elevation_km: from_ordered(raw[1]),
-        first_non_finite: [first(raw[2]), first(raw[3]), first(raw[4]), first(raw[5])],
-        land_mask: raw.split_off(HEADER_WORDS),
+    ctx.with_kernel(|ctx, k: &mut ReduceKernel| {
+        const KERNEL: &str = "crust_reduce";
+        let Some(b) = ctx.crust_buffers() else {
+            return Err(GpuError::Kernel {
+                kernel: KERNEL,
+                message: "the crust is not on the device".into(),
+            });
+        };
+        let n = b.len;
+        let bufs = [
+            b.elevation_km.clone(),
+            b.age_my.clone(),
+            b.orogeny_age_my.clone(),
+            b.fold_dir.clone(),
+        ];
+        let words = n.div_ceil(32);
+        let len = HEADER_WORDS + words;
+        if k.output.as_ref().is_none_or(|(cap, _)| *cap != len) {
+            let out = ctx.storage_buffer("crust_reduce output", 4 * len);
+            k.output = Some((len, out));
+            k.bind_group = None;
+        }
+        let Some((_, out)) = k.output.clone() else {
+            return Err(GpuError::Kernel {
+                kernel: KERNEL,
+                message: "no output buffer".into(),
+            });
+        };
+        if k.bind_group.is_none() {
+            let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("crust_reduce bindings"),
+                layout: &k.pipeline.get_bind_group_layout(0),
+                entries: &[
+                    entry(0, &k.uniforms),
+                    entry(1, &bufs[0]),
+                    entry(2, &bufs[1]),
+                    entry(3, &bufs[2]),
+                    entry(4, &bufs[3]),
+                    entry(5, &out),
+                ],
+            });
+            k.bind_group = Some(bg);
+        }
+        let u = ReduceUniforms {
+            count: n as u32,
+            words: words as u32,
+            row_stride: ROW_STRIDE,
+            _pad: 0,
+        };
+        let header: [u32; HEADER_WORDS] = [
+            to_ordered(f32::INFINITY),
+            to_ordered(f32::NEG_INFINITY),
+            NO_INDEX,
+            NO_INDEX,
+            NO_INDEX,
+            NO_INDEX,
+        ];
+        let (pipeline, uniforms) = (k.pipeline.clone(), k.uniforms.clone());
+        ctx.upload(&uniforms, bytemuck::bytes_of(&u));
+        ctx.upload(&out, bytemuck::cast_slice(&header));
+        let Some(bg) = k.bind_group.clone() else {
+            return Err(GpuError::Kernel {
+                kernel: KERNEL,
+                message: "no bind group".into(),
+            });
+        };
+        ctx.dispatch(KERNEL, &pipeline, &bg, words as u32)?;
+        // Poisoned: a readback that copies nothing cannot pass for a result.
+        let mut raw = vec![0xdead_beef_u32; len];
+        ctx.download(KERNEL, &out, bytemuck::cast_slice_mut(&mut raw))?;
+        let first = |w: u32| (w != NO_INDEX).then_some(w as usize);
+        Ok(CrustReduction {
+            min_elevation_km: from_ordered(raw[0]),
+            max_elevation_km: from_ordered(raw[1]),
+            first_non_finite: [first(raw[2]), first(raw[3]), first(raw[4]), first(raw[5])],
+            land_mask: raw.split_off(HEADER_WORDS),
+        })
     })
 }

@@ -2,11 +2,41 @@
 //! accretion on the resident elevation buffer. The CPU reference is [`erosion_cpu`] (the very
 //! function the CPU backend runs, in `src/systems/erosion.rs`).
 
-use crate::gpu::{GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer};
-pub use crate::systems::erosion::{ErosionRates, erosion_cpu};
+use crate::gpu::{
+    GpuContext, GpuError, Kernel, ROW_STRIDE, compute_pipeline, entry, uniform_buffer,
+};
+use crate::resources::Params;
 
 /// The kernel's WGSL.
 pub const WGSL: &str = include_str!("../../shaders/erosion.wgsl");
+
+/// The per-step constants of [`erode_sample`].
+#[derive(Clone, Copy, Debug)]
+pub struct ErosionRates {
+    pub(crate) z_c: f64,
+    pub(crate) z_a: f64,
+    pub(crate) z_t: f64,
+    pub(crate) erosion_km: f64,
+    pub(crate) damping_factor: f64,
+    pub(crate) sediment_km: f64,
+}
+
+impl ErosionRates {
+    /// Rates for one time step of the given parameters.
+    pub fn new(params: &Params) -> Self {
+        let dt = params.time.time_step_my;
+        let o = &params.ocean;
+        Self {
+            z_c: params.continent.max_elevation_km,
+            z_a: o.abyssal_elevation_km,
+            z_t: o.trench_elevation_km,
+            erosion_km: params.continent.erosion_mm_per_yr * dt,
+            damping_factor: (-(o.damping_mm_per_yr / o.trench_elevation_km.abs().max(1e-9)) * dt)
+                .exp(),
+            sediment_km: o.sediment_accretion_mm_per_yr * dt,
+        }
+    }
+}
 
 /// Uniforms of one erosion step. Keep in sync with `ErosionUniforms` in shaders/erosion.wgsl.
 #[repr(C)]
@@ -53,8 +83,8 @@ pub(crate) struct ErosionKernel {
     bind_group: Option<wgpu::BindGroup>,
 }
 
-impl ErosionKernel {
-    pub(crate) fn new(device: &wgpu::Device) -> Self {
+impl Kernel for ErosionKernel {
+    fn new(device: &wgpu::Device) -> Self {
         Self {
             pipeline: compute_pipeline(device, "erosion", WGSL),
             uniforms: uniform_buffer(
@@ -65,37 +95,39 @@ impl ErosionKernel {
             bind_group: None,
         }
     }
-    pub(crate) fn forget_bind_group(&mut self) {
+    fn forget_bind_groups(&mut self) {
         self.bind_group = None;
     }
 }
 
 /// One erosion step on the resident crust buffers (call [`GpuContext::sync_crust`] first).
 pub fn erosion_dispatch(ctx: &mut GpuContext, rates: &ErosionRates) -> Result<(), GpuError> {
-    let Some(b) = ctx.crust_buffers() else {
-        return Err(GpuError::Kernel {
-            kernel: "erosion",
-            message: "the crust is not on the device".into(),
-        });
-    };
-    let n = b.len as u32;
-    if ctx.erosion.bind_group.is_none() {
-        let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("erosion bindings"),
-            layout: &ctx.erosion.pipeline.get_bind_group_layout(0),
-            entries: &[
-                entry(0, &ctx.erosion.uniforms),
-                entry(1, &b.elevation_km),
-                entry(2, &b.crust_type),
-            ],
-        });
-        ctx.erosion.bind_group = Some(bg);
-    }
-    let u = ErosionUniforms::new(rates, n);
-    let (pipeline, uniforms) = (ctx.erosion.pipeline.clone(), ctx.erosion.uniforms.clone());
-    ctx.upload(&uniforms, bytemuck::bytes_of(&u));
-    let Some(bg) = ctx.erosion.bind_group.clone() else {
-        return Ok(());
-    };
-    ctx.dispatch("erosion", &pipeline, &bg, n)
+    ctx.with_kernel(|ctx, k: &mut ErosionKernel| {
+        let Some(b) = ctx.crust_buffers() else {
+            return Err(GpuError::Kernel {
+                kernel: "erosion",
+                message: "the crust is not on the device".into(),
+            });
+        };
+        let n = b.len as u32;
+        if k.bind_group.is_none() {
+            let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("erosion bindings"),
+                layout: &k.pipeline.get_bind_group_layout(0),
+                entries: &[
+                    entry(0, &k.uniforms),
+                    entry(1, &b.elevation_km),
+                    entry(2, &b.crust_type),
+                ],
+            });
+            k.bind_group = Some(bg);
+        }
+        let u = ErosionUniforms::new(rates, n);
+        let (pipeline, uniforms) = (k.pipeline.clone(), k.uniforms.clone());
+        ctx.upload(&uniforms, bytemuck::bytes_of(&u));
+        let Some(bg) = k.bind_group.clone() else {
+            return Ok(());
+        };
+        ctx.dispatch("erosion", &pipeline, &bg, n)
+    })
 }

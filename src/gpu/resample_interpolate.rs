@@ -19,10 +19,11 @@
 use glam::DVec3;
 
 use crate::geometry::SphereMesh;
-use crate::gpu::{GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer};
+use crate::gpu::resample_locate::SampleSource;
+use crate::gpu::{
+    GpuContext, GpuError, Kernel, ROW_STRIDE, compute_pipeline, entry, uniform_buffer,
+};
 use crate::resources::{Crust, CrustType, Orogeny, PlateTable};
-pub use crate::systems::resample::SampleSource;
-pub use crate::systems::resample::interpolate as resample_interpolate_cpu;
 
 /// The kernel's WGSL.
 pub const WGSL: &str = include_str!("../../shaders/resample_interpolate.wgsl");
@@ -55,8 +56,8 @@ pub(crate) struct InterpolateKernel {
     mesh: Option<(wgpu::Buffer, (usize, usize, u64))>,
 }
 
-impl InterpolateKernel {
-    pub(crate) fn new(device: &wgpu::Device) -> Self {
+impl Kernel for InterpolateKernel {
+    fn new(device: &wgpu::Device) -> Self {
         Self {
             pipeline: compute_pipeline(device, KERNEL, WGSL),
             uniforms: uniform_buffer(
@@ -139,203 +140,202 @@ fn interpolate_with(
     located: bool,
     next: &mut Crust,
 ) -> Result<(), GpuError> {
-    let n = mesh.len();
-    if old.len() != n || sources.len() != n {
-        return Err(fail(format!(
-            "inputs of different sizes: mesh {n}, old crust {}, sources {}",
-            old.len(),
-            sources.len()
-        )));
-    }
-    if let Some((j, s)) = sources.iter().enumerate().find(|(_, s)| {
-        !s.is_gap()
-            && (s.slot as usize >= table.plates.len()
-                || s.triangle as usize >= mesh.triangles.len())
-    }) {
-        return Err(fail(format!(
-            "source of sample {j} out of range (slot {}, triangle {})",
-            s.slot, s.triangle
-        )));
-    }
-    if n == 0 {
-        next.resize(0);
-        return Ok(());
-    }
-    let nw = n.div_ceil(4);
-    let limit = ctx.device.limits().max_storage_buffer_binding_size;
-    let old_words = 11 * n + 2 * nw;
-    check_size("the old crust", 4 * old_words, limit)?;
-    check_size("the mesh", 12 * n + 12 * mesh.triangles.len(), limit)?;
-    check_size("the sources", 32 * n, limit)?;
-    // The mesh: once per mesh.
-    let key = (
-        n,
-        mesh.triangles.len(),
-        mesh.positions.first().map_or(0, |p: &DVec3| p.x.to_bits()),
-    );
-    if ctx.interpolate.mesh.as_ref().is_none_or(|m| m.1 != key) {
-        let mut words: Vec<u32> = Vec::with_capacity(3 * n + 3 * mesh.triangles.len());
-        words.extend(
-            mesh.positions
-                .iter()
-                .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32].map(f32::to_bits)),
+    ctx.with_kernel(|ctx, k: &mut InterpolateKernel| {
+        let n = mesh.len();
+        if old.len() != n || sources.len() != n {
+            return Err(fail(format!(
+                "inputs of different sizes: mesh {n}, old crust {}, sources {}",
+                old.len(),
+                sources.len()
+            )));
+        }
+        if let Some((j, s)) = sources.iter().enumerate().find(|(_, s)| {
+            !s.is_gap()
+                && (s.slot as usize >= table.plates.len()
+                    || s.triangle as usize >= mesh.triangles.len())
+        }) {
+            return Err(fail(format!(
+                "source of sample {j} out of range (slot {}, triangle {})",
+                s.slot, s.triangle
+            )));
+        }
+        if n == 0 {
+            next.resize(0);
+            return Ok(());
+        }
+        let nw = n.div_ceil(4);
+        let limit = ctx.device.limits().max_storage_buffer_binding_size;
+        let old_words = 11 * n + 2 * nw;
+        check_size("the old crust", 4 * old_words, limit)?;
+        check_size("the mesh", 12 * n + 12 * mesh.triangles.len(), limit)?;
+        check_size("the sources", 32 * n, limit)?;
+        // The mesh: once per mesh.
+        let key = (
+            n,
+            mesh.triangles.len(),
+            mesh.positions.first().map_or(0, |p: &DVec3| p.x.to_bits()),
         );
-        words.extend_from_slice(bytemuck::cast_slice(&mesh.triangles));
-        let buf = ctx.storage_buffer("resample_interpolate mesh", 4 * words.len());
-        ctx.upload(&buf, bytemuck::cast_slice(&words));
-        ctx.interpolate.mesh = Some((buf, key));
-    }
-    // The plate table with frame groups, then the frame group of every plate id (the old
-    // crust holds plate ids; the kernel maps them through this table).
-    let groups = frame_groups(table);
-    let mut plate_words: Vec<u32> = Vec::with_capacity(16 * table.plates.len().max(1));
-    for (s, p) in table.plates.iter().enumerate() {
-        let m = p.world_from_plate;
-        plate_words.extend_from_slice(&[groups[s], 0, 0, 0]);
-        for i in 0..3 {
-            let row = [m.x_axis[i], m.y_axis[i], m.z_axis[i]].map(|x| (x as f32).to_bits());
-            plate_words.extend_from_slice(&row);
-            plate_words.push(0);
+        if k.mesh.as_ref().is_none_or(|m| m.1 != key) {
+            let mut words: Vec<u32> = Vec::with_capacity(3 * n + 3 * mesh.triangles.len());
+            words.extend(
+                mesh.positions
+                    .iter()
+                    .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32].map(f32::to_bits)),
+            );
+            words.extend_from_slice(bytemuck::cast_slice(&mesh.triangles));
+            let buf = ctx.storage_buffer("resample_interpolate mesh", 4 * words.len());
+            ctx.upload(&buf, bytemuck::cast_slice(&words));
+            k.mesh = Some((buf, key));
         }
-    }
-    let ids_at = plate_words.len();
-    let id_count = table
-        .plates
-        .iter()
-        .map(|p| p.id as usize + 1)
-        .max()
-        .unwrap_or(0);
-    check_size("the plate table", 4 * (ids_at + id_count), limit)?;
-    plate_words
-        .extend((0..id_count).map(|id| table.slot(id as u32).map_or(u32::MAX, |s| groups[s])));
-    if plate_words.is_empty() {
-        plate_words.resize(16, 0);
-    }
-    // The old crust is the resident one (stage 3 of docs/gpu-residency.md): copied on the
-    // device into the layout the kernel reads, nothing of it crosses the bus.
-    let Some(b) = ctx.crust_buffers().filter(|b| b.len == n) else {
-        return Err(fail(
-            "the old crust is not on the device (call sync_crust first)".into(),
-        ));
-    };
-    let old_buf = ctx.storage_buffer("resample_interpolate old crust", 4 * old_words);
-    {
-        let (n4, nw4) = (4 * n as u64, 4 * nw as u64);
-        let mut enc = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("resample_interpolate old crust"),
-            });
-        let mut at = 0;
-        for (field, bytes) in [
-            (&b.elevation_km, n4),
-            (&b.thickness_km, n4),
-            (&b.age_my, n4),
-            (&b.orogeny_age_my, n4),
-            (&b.ridge_dir, 3 * n4),
-            (&b.fold_dir, 3 * n4),
-            (&b.crust_type, nw4),
-            (&b.orogeny, nw4),
-            (&b.plate, n4),
-        ] {
-            enc.copy_buffer_to_buffer(field, 0, &old_buf, at, bytes);
-            at += bytes;
-        }
-        ctx.queue.submit([enc.finish()]);
-    }
-    ctx.check(KERNEL)?;
-    let src_buf = if located {
-        match ctx.locate.located_output(n) {
-            Some(b) => b,
-            None => {
-                return Err(fail(
-                    "no complete location of this size on the device".into(),
-                ));
+        // The plate table with frame groups, then the frame group of every plate id (the old
+        // crust holds plate ids; the kernel maps them through this table).
+        let groups = frame_groups(table);
+        let mut plate_words: Vec<u32> = Vec::with_capacity(16 * table.plates.len().max(1));
+        for (s, p) in table.plates.iter().enumerate() {
+            let m = p.world_from_plate;
+            plate_words.extend_from_slice(&[groups[s], 0, 0, 0]);
+            for i in 0..3 {
+                let row = [m.x_axis[i], m.y_axis[i], m.z_axis[i]].map(|x| (x as f32).to_bits());
+                plate_words.extend_from_slice(&row);
+                plate_words.push(0);
             }
         }
-    } else {
-        let source_words: Vec<u32> = sources
+        let ids_at = plate_words.len();
+        let id_count = table
+            .plates
             .iter()
-            .flat_map(crate::gpu::sources_patch::source_words)
-            .collect();
-        let buf = ctx.storage_buffer("resample_interpolate sources", 4 * source_words.len());
-        ctx.upload(&buf, bytemuck::cast_slice(&source_words));
-        buf
-    };
-    let plate_buf = ctx.storage_buffer("resample_interpolate plates", 4 * plate_words.len());
-    ctx.upload(&plate_buf, bytemuck::cast_slice(&plate_words));
-    let next_buf = ctx.storage_buffer("resample_interpolate next crust", 4 * old_words);
-    let Some((mesh_buf, _)) = ctx.interpolate.mesh.as_ref() else {
-        return Err(fail("the mesh is not on the device".into()));
-    };
-    let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("resample_interpolate bindings"),
-        layout: &ctx.interpolate.pipeline.get_bind_group_layout(0),
-        entries: &[
-            entry(0, &ctx.interpolate.uniforms),
-            entry(1, &src_buf),
-            entry(2, &plate_buf),
-            entry(3, mesh_buf),
-            entry(4, &old_buf),
-            entry(5, &next_buf),
-        ],
-    });
-    let u = InterpolateUniforms {
-        count: n as u32,
-        row_stride: ROW_STRIDE,
-        packed_words: nw as u32,
-        ids_at: ids_at as u32,
-        id_count: id_count as u32,
-        _pad: [0; 3],
-    };
-    let (pipeline, uniforms) = (
-        ctx.interpolate.pipeline.clone(),
-        ctx.interpolate.uniforms.clone(),
-    );
-    ctx.upload(&uniforms, bytemuck::bytes_of(&u));
-    ctx.dispatch(KERNEL, &pipeline, &bind_group, nw as u32)?;
-    // Poisoned before the readback: a copy that does not happen cannot pass.
-    let mut out = vec![u32::MAX; old_words];
-    ctx.download(KERNEL, &next_buf, bytemuck::cast_slice_mut(&mut out))?;
-    next.resize(n);
-    let f32s = |k: usize| out[k * n..(k + 1) * n].iter().map(|&b| f32::from_bits(b));
-    next.elevation_km
-        .iter_mut()
-        .zip(f32s(0))
-        .for_each(|(a, b)| *a = b);
-    next.thickness_km
-        .iter_mut()
-        .zip(f32s(1))
-        .for_each(|(a, b)| *a = b);
-    next.age_my
-        .iter_mut()
-        .zip(f32s(2))
-        .for_each(|(a, b)| *a = b);
-    next.orogeny_age_my
-        .iter_mut()
-        .zip(f32s(3))
-        .for_each(|(a, b)| *a = b);
-    for (field, at) in [(&mut next.ridge_dir, 4 * n), (&mut next.fold_dir, 7 * n)] {
-        for (d, c) in field.iter_mut().zip(out[at..at + 3 * n].chunks_exact(3)) {
-            *d = [c[0], c[1], c[2]].map(f32::from_bits);
+            .map(|p| p.id as usize + 1)
+            .max()
+            .unwrap_or(0);
+        check_size("the plate table", 4 * (ids_at + id_count), limit)?;
+        plate_words
+            .extend((0..id_count).map(|id| table.slot(id as u32).map_or(u32::MAX, |s| groups[s])));
+        if plate_words.is_empty() {
+            plate_words.resize(16, 0);
         }
-    }
-    let byte = |at: usize, i: usize| (out[at + i / 4] >> (8 * (i % 4))) as u8;
-    for i in 0..n {
-        next.crust_type[i] = match byte(10 * n, i) {
-            0 => CrustType::Oceanic,
-            1 => CrustType::Continental,
-            b => return Err(fail(format!("crust type code {b} at sample {i}"))),
+        // The old crust is the resident one (stage 3 of docs/gpu-residency.md): copied on the
+        // device into the layout the kernel reads, nothing of it crosses the bus.
+        let Some(b) = ctx.crust_buffers().filter(|b| b.len == n) else {
+            return Err(fail(
+                "the old crust is not on the device (call sync_crust first)".into(),
+            ));
         };
-        next.orogeny[i] = match byte(10 * n + nw, i) {
-            0 => Orogeny::None,
-            1 => Orogeny::Andean,
-            2 => Orogeny::Himalayan,
-            b => return Err(fail(format!("orogeny code {b} at sample {i}"))),
+        let old_buf = ctx.storage_buffer("resample_interpolate old crust", 4 * old_words);
+        {
+            let (n4, nw4) = (4 * n as u64, 4 * nw as u64);
+            let mut enc = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("resample_interpolate old crust"),
+                });
+            let mut at = 0;
+            for (field, bytes) in [
+                (&b.elevation_km, n4),
+                (&b.thickness_km, n4),
+                (&b.age_my, n4),
+                (&b.orogeny_age_my, n4),
+                (&b.ridge_dir, 3 * n4),
+                (&b.fold_dir, 3 * n4),
+                (&b.crust_type, nw4),
+                (&b.orogeny, nw4),
+                (&b.plate, n4),
+            ] {
+                enc.copy_buffer_to_buffer(field, 0, &old_buf, at, bytes);
+                at += bytes;
+            }
+            ctx.queue.submit([enc.finish()]);
+        }
+        ctx.check(KERNEL)?;
+        let src_buf = if located {
+            match crate::gpu::resample_locate::located_output(ctx, n) {
+                Some(b) => b,
+                None => {
+                    return Err(fail(
+                        "no complete location of this size on the device".into(),
+                    ));
+                }
+            }
+        } else {
+            let source_words: Vec<u32> = sources
+                .iter()
+                .flat_map(crate::gpu::sources_patch::source_words)
+                .collect();
+            let buf = ctx.storage_buffer("resample_interpolate sources", 4 * source_words.len());
+            ctx.upload(&buf, bytemuck::cast_slice(&source_words));
+            buf
         };
-    }
-    next.plate
-        .copy_from_slice(&out[10 * n + 2 * nw..11 * n + 2 * nw]);
-    ctx.traffic.interpolations += 1;
-    Ok(())
+        let plate_buf = ctx.storage_buffer("resample_interpolate plates", 4 * plate_words.len());
+        ctx.upload(&plate_buf, bytemuck::cast_slice(&plate_words));
+        let next_buf = ctx.storage_buffer("resample_interpolate next crust", 4 * old_words);
+        let Some((mesh_buf, _)) = k.mesh.as_ref() else {
+            return Err(fail("the mesh is not on the device".into()));
+        };
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("resample_interpolate bindings"),
+            layout: &k.pipeline.get_bind_group_layout(0),
+            entries: &[
+                entry(0, &k.uniforms),
+                entry(1, &src_buf),
+                entry(2, &plate_buf),
+                entry(3, mesh_buf),
+                entry(4, &old_buf),
+                entry(5, &next_buf),
+            ],
+        });
+        let u = InterpolateUniforms {
+            count: n as u32,
+            row_stride: ROW_STRIDE,
+            packed_words: nw as u32,
+            ids_at: ids_at as u32,
+            id_count: id_count as u32,
+            _pad: [0; 3],
+        };
+        let (pipeline, uniforms) = (k.pipeline.clone(), k.uniforms.clone());
+        ctx.upload(&uniforms, bytemuck::bytes_of(&u));
+        ctx.dispatch(KERNEL, &pipeline, &bind_group, nw as u32)?;
+        // Poisoned before the readback: a copy that does not happen cannot pass.
+        let mut out = vec![u32::MAX; old_words];
+        ctx.download(KERNEL, &next_buf, bytemuck::cast_slice_mut(&mut out))?;
+        next.resize(n);
+        let f32s = |k: usize| out[k * n..(k + 1) * n].iter().map(|&b| f32::from_bits(b));
+        next.elevation_km
+            .iter_mut()
+            .zip(f32s(0))
+            .for_each(|(a, b)| *a = b);
+        next.thickness_km
+            .iter_mut()
+            .zip(f32s(1))
+            .for_each(|(a, b)| *a = b);
+        next.age_my
+            .iter_mut()
+            .zip(f32s(2))
+            .for_each(|(a, b)| *a = b);
+        next.orogeny_age_my
+            .iter_mut()
+            .zip(f32s(3))
+            .for_each(|(a, b)| *a = b);
+        for (field, at) in [(&mut next.ridge_dir, 4 * n), (&mut next.fold_dir, 7 * n)] {
+            for (d, c) in field.iter_mut().zip(out[at..at + 3 * n].chunks_exact(3)) {
+                *d = [c[0], c[1], c[2]].map(f32::from_bits);
+            }
+        }
+        let byte = |at: usize, i: usize| (out[at + i / 4] >> (8 * (i % 4))) as u8;
+        for i in 0..n {
+            next.crust_type[i] = match byte(10 * n, i) {
+                0 => CrustType::Oceanic,
+                1 => CrustType::Continental,
+                b => return Err(fail(format!("crust type code {b} at sample {i}"))),
+            };
+            next.orogeny[i] = match byte(10 * n + nw, i) {
+                0 => Orogeny::None,
+                1 => Orogeny::Andean,
+                2 => Orogeny::Himalayan,
+                b => return Err(fail(format!("orogeny code {b} at sample {i}"))),
+            };
+        }
+        next.plate
+            .copy_from_slice(&out[10 * n + 2 * nw..11 * n + 2 * nw]);
+        ctx.traffic.interpolations += 1;
+        Ok(())
+    })
 }

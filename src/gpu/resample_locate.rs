@@ -29,14 +29,126 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::geometry::SphereMesh;
-use crate::gpu::{GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer};
-use crate::resources::{Crust, NO_PLATE, PlateTable};
-pub use crate::systems::resample::{
-    CellPlates, OverlapRules, SampleSource, locate_one, resample_locate_cpu,
+use crate::gpu::{
+    GpuContext, GpuError, Kernel, ROW_STRIDE, compute_pipeline, entry, uniform_buffer,
 };
+use crate::resources::{Crust, NO_PLATE, PlateTable};
 
 /// The kernel's WGSL.
 pub const WGSL: &str = include_str!("../../shaders/resample_locate.wgsl");
+
+/// Up to four plate slots per locator cell: the plates owning a vertex of a triangle that
+/// touches the cell ([`CellPlates::MANY`] in the first entry when there are more). A plate absent
+/// from the cell of a point cannot cover the point, so most plates are rejected without locating.
+pub struct CellPlates {
+    cells: Vec<[u16; 4]>,
+}
+
+impl CellPlates {
+    const EMPTY: u16 = u16::MAX;
+    const MANY: u16 = u16::MAX - 1;
+
+    /// Builds the lists for the ownership of `old` (slots of `table`).
+    pub fn build(mesh: &SphereMesh, old: &Crust, table: &PlateTable) -> Self {
+        let slot_of_sample: Vec<u16> = old
+            .plate
+            .par_iter()
+            .with_min_len(4096)
+            .map(|&p| {
+                table
+                    .slot(p)
+                    .map_or(Self::EMPTY, |s| s.min(Self::MANY as usize - 1) as u16)
+            })
+            .collect();
+        let loc = mesh.locator();
+        let mut cells = vec![[Self::EMPTY; 4]; loc.cell_count()];
+        let many_slots = table.len() >= Self::MANY as usize;
+        cells
+            .par_iter_mut()
+            .enumerate()
+            .with_min_len(1024)
+            .for_each(|(c, list)| {
+                if many_slots {
+                    *list = [Self::MANY, Self::EMPTY, Self::EMPTY, Self::EMPTY];
+                    return;
+                }
+                let mut n = 0;
+                for &t in loc.cell_triangles(c) {
+                    for &v in &mesh.triangles[t as usize] {
+                        let s = slot_of_sample[v as usize];
+                        if s == Self::EMPTY || list[..n].contains(&s) {
+                            continue;
+                        }
+                        if n == 4 {
+                            *list = [Self::MANY, Self::EMPTY, Self::EMPTY, Self::EMPTY];
+                            return;
+                        }
+                        list[n] = s;
+                        n += 1;
+                    }
+                }
+            });
+        Self { cells }
+    }
+
+    /// The lists, one `[u16; 4]` per locator cell (what the GPU kernel reads).
+    pub fn lists(&self) -> &[[u16; 4]] {
+        &self.cells
+    }
+
+    /// Whether plate `slot` may cover points of cell `c`.
+    #[inline]
+    pub fn may_cover(&self, c: usize, slot: u32) -> bool {
+        let l = &self.cells[c];
+        l[0] == Self::MANY || l.contains(&(slot as u16))
+    }
+}
+
+/// Where one output sample takes its data from.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SampleSource {
+    /// Slot (in the plate table) of the covering plate, `u32::MAX` for a gap.
+    pub slot: u32,
+    /// The plate the sample belongs to after the resampling: the covering plate, or the plate a
+    /// colliding terrane sutures to.
+    pub plate: u32,
+    /// Index of the pending suture that moved this sample, `u32::MAX` if none.
+    pub suture: u32,
+    /// True when another plate's continental crust covered this sample too and went under.
+    pub continental_lost: bool,
+    /// Triangle of the reference mesh, in the plate frame.
+    pub triangle: u32,
+    /// Barycentric weights in that triangle (f32 is plenty for interpolating f32 fields, and a
+    /// weight of exactly 1 stays exactly 1).
+    pub weights: [f32; 3],
+}
+
+impl SampleSource {
+    pub(crate) const GAP: SampleSource = SampleSource {
+        slot: u32::MAX,
+        plate: NO_PLATE,
+        suture: u32::MAX,
+        continental_lost: false,
+        triangle: 0,
+        weights: [0.0; 3],
+    };
+    /// True when no plate covers the sample.
+    pub fn is_gap(&self) -> bool {
+        self.slot == u32::MAX
+    }
+}
+
+/// What decides between two plates that both cover a sample from their core (an overlap).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct OverlapRules<'a> {
+    /// (overriding, subducting) plate pairs of the subduction fronts, sorted.
+    pub pairs: &'a [(u32, u32)],
+    /// Per reference sample of the old crust: the index of the pending suture that moves it
+    /// (`u32::MAX` if none).
+    pub suture_of_sample: &'a [u32],
+    /// Target plate of each pending suture.
+    pub suture_target: &'a [u32],
+}
 
 /// Flag of the kernel's output: another plate's continental crust went under here.
 const FLAG_CONTINENTAL_LOST: u32 = 1;
@@ -114,8 +226,8 @@ pub(crate) struct LocateKernel {
     located_complete: bool,
 }
 
-impl LocateKernel {
-    pub(crate) fn new(device: &wgpu::Device) -> Self {
+impl Kernel for LocateKernel {
+    fn new(device: &wgpu::Device) -> Self {
         Self {
             pipeline: compute_pipeline(device, "resample_locate", WGSL),
             uniforms: uniform_buffer(
@@ -168,13 +280,17 @@ fn too_large(what: &str, bytes: usize, limit: u64) -> Result<(), GpuError> {
     Ok(())
 }
 
-fn ensure_mesh(ctx: &mut GpuContext, mesh: &SphereMesh) -> Result<(), GpuError> {
+fn ensure_mesh(
+    ctx: &mut GpuContext,
+    k: &mut LocateKernel,
+    mesh: &SphereMesh,
+) -> Result<(), GpuError> {
     let loc = mesh.locator();
     let key = (mesh.len(), mesh.triangles.len(), loc.cell_count());
-    if ctx.locate.mesh.as_ref().is_some_and(|m| m.key == key) {
+    if k.mesh.as_ref().is_some_and(|m| m.key == key) {
         return Ok(());
     }
-    ctx.locate.mesh = None;
+    k.mesh = None;
     let limit = ctx.device.limits().max_storage_buffer_binding_size;
     let positions: Vec<f32> = mesh
         .positions
@@ -201,7 +317,7 @@ fn ensure_mesh(ctx: &mut GpuContext, mesh: &SphereMesh) -> Result<(), GpuError> 
     ctx.upload(&b.triangles, bytemuck::cast_slice(triangles));
     ctx.upload(&b.cells, bytemuck::cast_slice(&cells));
     ctx.check("resample_locate mesh upload")?;
-    ctx.locate.mesh = Some(b);
+    k.mesh = Some(b);
     Ok(())
 }
 
@@ -241,196 +357,165 @@ pub fn resample_locate_raw(
     rules: &OverlapRules,
     cell_plates: &CellPlates,
 ) -> Result<(Vec<SampleSource>, Vec<u32>), GpuError> {
-    let n = mesh.len();
-    if old.len() != n || cell_plates.lists().len() != mesh.locator().cell_count() {
-        return Err(GpuError::Kernel {
-            kernel: "resample_locate",
-            message: format!(
-                "inputs of different sizes: mesh {n}, crust {}, cell lists {}",
-                old.len(),
-                cell_plates.lists().len()
-            ),
+    ctx.with_kernel(|ctx, k: &mut LocateKernel| {
+        let n = mesh.len();
+        if old.len() != n || cell_plates.lists().len() != mesh.locator().cell_count() {
+            return Err(GpuError::Kernel {
+                kernel: "resample_locate",
+                message: format!(
+                    "inputs of different sizes: mesh {n}, crust {}, cell lists {}",
+                    old.len(),
+                    cell_plates.lists().len()
+                ),
+            });
+        }
+        if rules.suture_of_sample.len() > n {
+            return Err(GpuError::Kernel {
+                kernel: "resample_locate",
+                message: "more sutured samples than samples".into(),
+            });
+        }
+        k.located_complete = false;
+        ensure_mesh(ctx, k, mesh)?;
+        // The auxiliary buffer: plates, pairs, suture targets, cell lists.
+        let plates = plate_words(table);
+        let mut aux: Vec<u32> = bytemuck::cast_slice(&plates).to_vec();
+        let pairs_at = aux.len() as u32;
+        for &(a, b) in rules.pairs {
+            aux.extend_from_slice(&[a, b]);
+        }
+        let targets_at = aux.len() as u32;
+        aux.extend_from_slice(rules.suture_target);
+        let cells_at = aux.len() as u32;
+        aux.extend_from_slice(bytemuck::cast_slice(cell_plates.lists()));
+        let limit = ctx.device.limits().max_storage_buffer_binding_size;
+        too_large("the plate table and cell lists", 4 * aux.len(), limit)?;
+        too_large("the output", 32 * n, limit)?;
+        // The old crust's plates and crust types are the resident buffers (stage 3 of
+        // docs/gpu-residency.md): nothing of the crust goes up here.
+        let Some((plate_buf, type_buf)) = ctx
+            .crust_buffers()
+            .filter(|b| b.len == n)
+            .map(|b| (b.plate.clone(), b.crust_type.clone()))
+        else {
+            return Err(GpuError::Kernel {
+                kernel: "resample_locate",
+                message: "the old crust is not on the device (call sync_crust first)".into(),
+            });
+        };
+        let aux_buf = ctx.storage_buffer("locate aux", 4 * aux.len());
+        ctx.upload(&aux_buf, bytemuck::cast_slice(&aux));
+        let suture_buf = ctx.storage_buffer("locate sutures", 4 * rules.suture_of_sample.len());
+        ctx.upload(&suture_buf, bytemuck::cast_slice(rules.suture_of_sample));
+        // The output stays on the device for the interpolation (one buffer per mesh size).
+        if k.located.as_ref().is_none_or(|(_, len)| *len != n) {
+            let buf = ctx.storage_buffer("locate output", 32 * n);
+            k.located = Some((buf, n));
+        }
+        let Some(out_buf) = k.located.as_ref().map(|(b, _)| b.clone()) else {
+            return Err(GpuError::Kernel {
+                kernel: "resample_locate",
+                message: "no output buffer".into(),
+            });
+        };
+        let Some(m) = k.mesh.as_ref() else {
+            return Err(GpuError::Kernel {
+                kernel: "resample_locate",
+                message: "the mesh is not on the device".into(),
+            });
+        };
+        let u = LocateUniforms {
+            count: n as u32,
+            row_stride: ROW_STRIDE,
+            plate_count: plates.len() as u32,
+            pair_count: rules.pairs.len() as u32,
+            suture_len: rules.suture_of_sample.len() as u32,
+            grid: m.grid,
+            cell_count: m.cell_count,
+            pairs_at,
+            targets_at,
+            cells_at,
+            doubt_w: doubt_margin(mesh.mean_spacing_rad()),
+            doubt_cell: 1e-3,
+        };
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("resample_locate bindings"),
+            layout: &k.pipeline.get_bind_group_layout(0),
+            entries: &[
+                entry(0, &k.uniforms),
+                entry(1, &m.positions),
+                entry(2, &m.triangles),
+                entry(3, &m.cells),
+                entry(4, &aux_buf),
+                entry(5, &plate_buf),
+                entry(6, &type_buf),
+                entry(7, &suture_buf),
+                entry(8, &out_buf),
+            ],
         });
-    }
-    if rules.suture_of_sample.len() > n {
-        return Err(GpuError::Kernel {
-            kernel: "resample_locate",
-            message: "more sutured samples than samples".into(),
-        });
-    }
-    ctx.locate.located_complete = false;
-    ensure_mesh(ctx, mesh)?;
-    // The auxiliary buffer: plates, pairs, suture targets, cell lists.
-    let plates = plate_words(table);
-    let mut aux: Vec<u32> = bytemuck::cast_slice(&plates).to_vec();
-    let pairs_at = aux.len() as u32;
-    for &(a, b) in rules.pairs {
-        aux.extend_from_slice(&[a, b]);
-    }
-    let targets_at = aux.len() as u32;
-    aux.extend_from_slice(rules.suture_target);
-    let cells_at = aux.len() as u32;
-    aux.extend_from_slice(bytemuck::cast_slice(cell_plates.lists()));
-    let limit = ctx.device.limits().max_storage_buffer_binding_size;
-    too_large("the plate table and cell lists", 4 * aux.len(), limit)?;
-    too_large("the output", 32 * n, limit)?;
-    // The old crust's plates and crust types are the resident buffers (stage 3 of
-    // docs/gpu-residency.md): nothing of the crust goes up here.
-    let Some((plate_buf, type_buf)) = ctx
-        .crust_buffers()
-        .filter(|b| b.len == n)
-        .map(|b| (b.plate.clone(), b.crust_type.clone()))
-    else {
-        return Err(GpuError::Kernel {
-            kernel: "resample_locate",
-            message: "the old crust is not on the device (call sync_crust first)".into(),
-        });
-    };
-    let aux_buf = ctx.storage_buffer("locate aux", 4 * aux.len());
-    ctx.upload(&aux_buf, bytemuck::cast_slice(&aux));
-    let suture_buf = ctx.storage_buffer("locate sutures", 4 * rules.suture_of_sample.len());
-    ctx.upload(&suture_buf, bytemuck::cast_slice(rules.suture_of_sample));
-    // The output stays on the device for the interpolation (one buffer per mesh size).
-    if ctx.locate.located.as_ref().is_none_or(|(_, len)| *len != n) {
-        let buf = ctx.storage_buffer("locate output", 32 * n);
-        ctx.locate.located = Some((buf, n));
-    }
-    let Some(out_buf) = ctx.locate.located.as_ref().map(|(b, _)| b.clone()) else {
-        return Err(GpuError::Kernel {
-            kernel: "resample_locate",
-            message: "no output buffer".into(),
-        });
-    };
-    let Some(m) = ctx.locate.mesh.as_ref() else {
-        return Err(GpuError::Kernel {
-            kernel: "resample_locate",
-            message: "the mesh is not on the device".into(),
-        });
-    };
-    let u = LocateUniforms {
-        count: n as u32,
-        row_stride: ROW_STRIDE,
-        plate_count: plates.len() as u32,
-        pair_count: rules.pairs.len() as u32,
-        suture_len: rules.suture_of_sample.len() as u32,
-        grid: m.grid,
-        cell_count: m.cell_count,
-        pairs_at,
-        targets_at,
-        cells_at,
-        doubt_w: doubt_margin(mesh.mean_spacing_rad()),
-        doubt_cell: 1e-3,
-    };
-    let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("resample_locate bindings"),
-        layout: &ctx.locate.pipeline.get_bind_group_layout(0),
-        entries: &[
-            entry(0, &ctx.locate.uniforms),
-            entry(1, &m.positions),
-            entry(2, &m.triangles),
-            entry(3, &m.cells),
-            entry(4, &aux_buf),
-            entry(5, &plate_buf),
-            entry(6, &type_buf),
-            entry(7, &suture_buf),
-            entry(8, &out_buf),
-        ],
-    });
-    let (pipeline, uniforms) = (ctx.locate.pipeline.clone(), ctx.locate.uniforms.clone());
-    ctx.upload(&uniforms, bytemuck::bytes_of(&u));
-    ctx.dispatch("resample_locate", &pipeline, &bind_group, n as u32)?;
-    let mut words = vec![[u32::MAX; 8]; n];
-    ctx.download(
-        "resample_locate",
-        &out_buf,
-        bytemuck::cast_slice_mut(&mut words),
-    )?;
-    let doubtful: Vec<u32> = words
-        .iter()
-        .enumerate()
-        .filter(|(_, w)| w[3] & FLAG_DOUBT != 0)
-        .map(|(j, _)| j as u32)
-        .collect();
-    let sources = words
-        .par_iter()
-        .with_min_len(4096)
-        .map(|w| {
-            if w[0] == u32::MAX {
-                SampleSource {
-                    slot: u32::MAX,
-                    plate: NO_PLATE,
-                    suture: u32::MAX,
-                    continental_lost: false,
-                    triangle: 0,
-                    weights: [0.0; 3],
+        let (pipeline, uniforms) = (k.pipeline.clone(), k.uniforms.clone());
+        ctx.upload(&uniforms, bytemuck::bytes_of(&u));
+        ctx.dispatch("resample_locate", &pipeline, &bind_group, n as u32)?;
+        let mut words = vec![[u32::MAX; 8]; n];
+        ctx.download(
+            "resample_locate",
+            &out_buf,
+            bytemuck::cast_slice_mut(&mut words),
+        )?;
+        let doubtful: Vec<u32> = words
+            .iter()
+            .enumerate()
+            .filter(|(_, w)| w[3] & FLAG_DOUBT != 0)
+            .map(|(j, _)| j as u32)
+            .collect();
+        let sources = words
+            .par_iter()
+            .with_min_len(4096)
+            .map(|w| {
+                if w[0] == u32::MAX {
+                    SampleSource {
+                        slot: u32::MAX,
+                        plate: NO_PLATE,
+                        suture: u32::MAX,
+                        continental_lost: false,
+                        triangle: 0,
+                        weights: [0.0; 3],
+                    }
+                } else {
+                    SampleSource {
+                        slot: w[0],
+                        plate: w[1],
+                        suture: w[2],
+                        continental_lost: w[3] & FLAG_CONTINENTAL_LOST != 0,
+                        triangle: w[4],
+                        weights: [
+                            f32::from_bits(w[5]),
+                            f32::from_bits(w[6]),
+                            f32::from_bits(w[7]),
+                        ],
+                    }
                 }
-            } else {
-                SampleSource {
-                    slot: w[0],
-                    plate: w[1],
-                    suture: w[2],
-                    continental_lost: w[3] & FLAG_CONTINENTAL_LOST != 0,
-                    triangle: w[4],
-                    weights: [
-                        f32::from_bits(w[5]),
-                        f32::from_bits(w[6]),
-                        f32::from_bits(w[7]),
-                    ],
-                }
-            }
-        })
-        .collect();
-    Ok((sources, doubtful))
+            })
+            .collect();
+        Ok((sources, doubtful))
+    })
 }
 
-/// The GPU counterpart of [`resample_locate_cpu`]: locates every sample on the device, then the
-/// samples the kernel left to the CPU with [`locate_one`] (on the host copy of `old`'s plates
-/// and crust types, which no kernel writes). The resident crust must hold `old` (call
-/// [`GpuContext::sync_crust`] first). Same outputs as the CPU except the
-/// weights (f32 geometry, see the module documentation).
-pub fn resample_locate_gpu(
-    ctx: &mut GpuContext,
-    mesh: &SphereMesh,
-    old: &Crust,
-    table: &PlateTable,
-    rules: &OverlapRules,
-    sources: &mut Vec<SampleSource>,
-) -> Result<LocateReport, GpuError> {
-    let cell_plates = CellPlates::build(mesh, old, table);
-    let (located, doubtful) = resample_locate_raw(ctx, mesh, old, table, rules, &cell_plates)?;
-    *sources = located;
-    let redone: Vec<SampleSource> = doubtful
-        .par_iter()
-        .with_min_len(256)
-        .map(|&j| {
-            locate_one(
-                mesh,
-                old,
-                table,
-                &cell_plates,
-                rules,
-                mesh.positions[j as usize],
-            )
-        })
-        .collect();
-    // The rechecked sources go into the kernel's output on the device as well (36 bytes each),
-    // so the interpolation reads every source there (stage 3b of docs/gpu-residency.md).
-    let patches: Vec<(u32, [u32; 8])> = doubtful
-        .iter()
-        .zip(&redone)
-        .map(|(&j, s)| (j, crate::gpu::sources_patch::source_words(s)))
-        .collect();
-    if let Some((buf, _)) = ctx.locate.located.clone() {
-        crate::gpu::sources_patch::sources_patch_gpu(ctx, &buf, mesh.len(), &patches)?;
-        ctx.locate.located_complete = true;
-    }
-    for (&j, s) in doubtful.iter().zip(redone) {
-        sources[j as usize] = s;
-    }
-    ctx.traffic.locations += 1;
-    ctx.traffic.rechecked_samples += doubtful.len() as u64;
-    Ok(LocateReport {
-        rechecked: doubtful.len(),
-        gaps: sources.iter().filter(|s| s.is_gap()).count(),
-    })
+/// The buffer holding the last location's output on the device (8 words a sample) and its
+/// sample count, if a location ran.
+pub fn located_buffer(ctx: &mut GpuContext) -> Option<(wgpu::Buffer, usize)> {
+    ctx.with_kernel(|_, k: &mut LocateKernel| k.located.clone())
+}
+
+/// Records that the last location's output on the device now holds, for every sample, the
+/// source the host settled on (the rechecked samples patched in with
+/// [`crate::gpu::sources_patch`]), so the interpolation may read the sources there.
+pub fn mark_located_complete(ctx: &mut GpuContext) {
+    ctx.with_kernel(|_, k: &mut LocateKernel| k.located_complete = true);
+}
+
+/// The last location's output on the device when it is complete (see
+/// [`mark_located_complete`]) and has `n` samples.
+pub fn located_output(ctx: &mut GpuContext, n: usize) -> Option<wgpu::Buffer> {
+    ctx.with_kernel(|_, k: &mut LocateKernel| k.located_output(n))
 }

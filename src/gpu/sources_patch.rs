@@ -5,8 +5,10 @@
 //! reference is [`sources_patch_cpu`]; the kernel copies raw 32-bit words, so both agree bit for
 //! bit. Per resampling, 36 bytes go up per rechecked sample.
 
-use crate::gpu::{GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer};
-pub use crate::systems::resample::SampleSource;
+use crate::gpu::resample_locate::SampleSource;
+use crate::gpu::{
+    GpuContext, GpuError, Kernel, ROW_STRIDE, compute_pipeline, entry, uniform_buffer,
+};
 
 /// The kernel's WGSL.
 pub const WGSL: &str = include_str!("../../shaders/sources_patch.wgsl");
@@ -33,8 +35,8 @@ pub(crate) struct PatchKernel {
     uniforms: wgpu::Buffer,
 }
 
-impl PatchKernel {
-    pub(crate) fn new(device: &wgpu::Device) -> Self {
+impl Kernel for PatchKernel {
+    fn new(device: &wgpu::Device) -> Self {
         Self {
             pipeline: compute_pipeline(device, KERNEL, WGSL),
             uniforms: uniform_buffer(
@@ -78,44 +80,42 @@ pub fn sources_patch_gpu(
     samples: usize,
     patches: &[(u32, [u32; 8])],
 ) -> Result<(), GpuError> {
-    let fail = |message: String| GpuError::Kernel {
-        kernel: KERNEL,
-        message,
-    };
-    if (target.size() as usize) < 32 * samples {
-        return Err(fail(format!(
-            "target of {} bytes for {samples} sources",
-            target.size()
-        )));
-    }
-    if let Some((bad, _)) = patches.iter().find(|(j, _)| *j as usize >= samples) {
-        return Err(fail(format!("index {bad} out of {samples} sources")));
-    }
-    if patches.is_empty() {
-        return Ok(());
-    }
-    let words: Vec<u32> = patches
-        .iter()
-        .flat_map(|(j, w)| std::iter::once(*j).chain(w.iter().copied()))
-        .collect();
-    let buf = ctx.storage_buffer("sources_patch patches", 4 * words.len());
-    ctx.upload(&buf, bytemuck::cast_slice(&words));
-    let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("sources_patch bindings"),
-        layout: &ctx.patch.pipeline.get_bind_group_layout(0),
-        entries: &[
-            entry(0, &ctx.patch.uniforms),
-            entry(1, &buf),
-            entry(2, target),
-        ],
-    });
-    let u = PatchUniforms {
-        count: patches.len() as u32,
-        samples: samples as u32,
-        row_stride: ROW_STRIDE,
-        _pad: 0,
-    };
-    let (pipeline, uniforms) = (ctx.patch.pipeline.clone(), ctx.patch.uniforms.clone());
-    ctx.upload(&uniforms, bytemuck::bytes_of(&u));
-    ctx.dispatch(KERNEL, &pipeline, &bg, patches.len() as u32)
+    ctx.with_kernel(|ctx, k: &mut PatchKernel| {
+        let fail = |message: String| GpuError::Kernel {
+            kernel: KERNEL,
+            message,
+        };
+        if (target.size() as usize) < 32 * samples {
+            return Err(fail(format!(
+                "target of {} bytes for {samples} sources",
+                target.size()
+            )));
+        }
+        if let Some((bad, _)) = patches.iter().find(|(j, _)| *j as usize >= samples) {
+            return Err(fail(format!("index {bad} out of {samples} sources")));
+        }
+        if patches.is_empty() {
+            return Ok(());
+        }
+        let words: Vec<u32> = patches
+            .iter()
+            .flat_map(|(j, w)| std::iter::once(*j).chain(w.iter().copied()))
+            .collect();
+        let buf = ctx.storage_buffer("sources_patch patches", 4 * words.len());
+        ctx.upload(&buf, bytemuck::cast_slice(&words));
+        let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("sources_patch bindings"),
+            layout: &k.pipeline.get_bind_group_layout(0),
+            entries: &[entry(0, &k.uniforms), entry(1, &buf), entry(2, target)],
+        });
+        let u = PatchUniforms {
+            count: patches.len() as u32,
+            samples: samples as u32,
+            row_stride: ROW_STRIDE,
+            _pad: 0,
+        };
+        let (pipeline, uniforms) = (k.pipeline.clone(), k.uniforms.clone());
+        ctx.upload(&uniforms, bytemuck::bytes_of(&u));
+        ctx.dispatch(KERNEL, &pipeline, &bg, patches.len() as u32)
+    })
 }

@@ -11,14 +11,63 @@
 use bevy_ecs::change_detection::Tick;
 
 use crate::gpu::{
-    FieldMask, GpuContext, GpuError, ROW_STRIDE, compute_pipeline, entry, uniform_buffer,
+    FieldMask, GpuContext, GpuError, Kernel, ROW_STRIDE, compute_pipeline, entry, uniform_buffer,
 };
 use crate::resources::convergence::NONE;
-use crate::resources::{ConvergenceField, Crust, FrontPoints};
-pub use crate::systems::convergence::{UpliftConstants, subduction_uplift_cpu};
+use crate::resources::{ConvergenceField, Crust, FrontPoints, Params};
 
 /// The kernel's WGSL.
 pub const WGSL: &str = include_str!("../../shaders/subduction_uplift.wgsl");
+
+/// The constants of one subduction-uplift step (from the parameters).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UpliftConstants {
+    /// r_s: subduction distance, km.
+    pub rs: f64,
+    /// r_c: control distance, km.
+    pub rc: f64,
+    /// δt, My.
+    pub dt: f64,
+    /// u0, km/My.
+    pub u0: f64,
+    /// v0: maximum plate speed, km/My.
+    pub v0: f64,
+    /// z_t: trench elevation, km.
+    pub z_t: f64,
+    /// z_c: maximum continental elevation, km.
+    pub z_c: f64,
+    /// z_a: abyssal elevation, km.
+    pub z_a: f64,
+    /// β: fold weight.
+    pub beta: f64,
+    /// Trench width, km.
+    pub wt: f64,
+    /// Trench deepening rate per step.
+    pub rate: f64,
+    /// z_r: ridge elevation, km.
+    pub z_r: f64,
+}
+
+impl UpliftConstants {
+    /// The constants for `params`.
+    pub fn new(params: &Params) -> Self {
+        let s = &params.subduction;
+        Self {
+            rs: s.distance_km,
+            rc: s.control_distance_km,
+            dt: params.time.time_step_my,
+            u0: s.uplift_mm_per_yr,
+            v0: params.plates.max_speed_mm_per_yr,
+            z_t: params.ocean.trench_elevation_km,
+            z_c: params.continent.max_elevation_km,
+            z_a: params.ocean.abyssal_elevation_km,
+            beta: s.fold_weight,
+            wt: s.trench_width_km,
+            rate: s.trench_rate,
+            z_r: params.ocean.ridge_elevation_km,
+        }
+    }
+}
 
 /// Uniforms of one uplift step. Keep in sync with `UpliftUniforms` in
 /// shaders/subduction_uplift.wgsl.
@@ -135,8 +184,8 @@ pub(crate) struct UpliftKernel {
     bind_group: Option<wgpu::BindGroup>,
 }
 
-impl UpliftKernel {
-    pub(crate) fn new(device: &wgpu::Device) -> Self {
+impl Kernel for UpliftKernel {
+    fn new(device: &wgpu::Device) -> Self {
         Self {
             pipeline: compute_pipeline(device, "subduction_uplift", WGSL),
             uniforms: uniform_buffer(
@@ -150,7 +199,7 @@ impl UpliftKernel {
             bind_group: None,
         }
     }
-    pub(crate) fn forget_bind_groups(&mut self) {
+    fn forget_bind_groups(&mut self) {
         self.bind_group = None;
     }
 }
@@ -167,106 +216,107 @@ pub fn subduction_uplift_dispatch(
     field: &ConvergenceField,
     field_tick: Option<Tick>,
 ) -> Result<(), GpuError> {
-    let Some(n) = ctx.crust_buffers().map(|b| b.len) else {
-        return Err(GpuError::Kernel {
-            kernel: KERNEL,
-            message: "the crust is not on the device".into(),
-        });
-    };
-    if field.overriding_point.len() != n
-        || field.overriding_distance_km.len() != n
-        || field.subducting_point.len() != n
-        || field.subducting_distance_km.len() != n
-    {
-        return Err(GpuError::Kernel {
-            kernel: KERNEL,
-            message: format!("convergence field does not have {n} samples"),
-        });
-    }
-    if let Some(bad) = field
-        .overriding_point
-        .iter()
-        .chain(&field.subducting_point)
-        .find(|&&p| p != NONE && p as usize >= fp.len())
-    {
-        return Err(GpuError::Kernel {
-            kernel: KERNEL,
-            message: format!("front point {bad} out of range ({} points)", fp.len()),
-        });
-    }
-    // Convergence field: once per resampling.
-    if ctx.uplift.field.as_ref().is_none_or(|f| f.1 != n) {
-        let buf = ctx.storage_buffer("convergence field (od, op, sd, sp)", 16 * n);
-        ctx.uplift.field = Some((buf, n));
-        ctx.uplift.field_synced = None;
-        ctx.uplift.bind_group = None;
-    }
-    if field_tick.is_none() || ctx.uplift.field_synced != field_tick {
-        let packed: Vec<[u32; 4]> = (0..n)
-            .map(|i| {
-                [
-                    field.overriding_distance_km[i].to_bits(),
-                    field.overriding_point[i],
-                    field.subducting_distance_km[i].to_bits(),
-                    field.subducting_point[i],
-                ]
-            })
-            .collect();
-        if let Some((buf, _)) = ctx.uplift.field.clone() {
-            ctx.upload(&buf, bytemuck::cast_slice(&packed));
-        }
-        ctx.uplift.field_synced = field_tick;
-    }
-    // Front table: every step.
-    let table = front_table(k, fp);
-    if ctx
-        .uplift
-        .fronts
-        .as_ref()
-        .is_none_or(|f| f.1 < table.len().max(1))
-    {
-        let cap = table.len().max(1).next_power_of_two();
-        let buf = ctx.storage_buffer("front points", cap * std::mem::size_of::<FrontGpu>());
-        ctx.uplift.fronts = Some((buf, cap));
-        ctx.uplift.bind_group = None;
-    }
-    if let Some((buf, _)) = ctx.uplift.fronts.clone() {
-        ctx.upload(&buf, bytemuck::cast_slice(&table));
-    }
-    if ctx.uplift.bind_group.is_none() {
-        let (Some(b), Some((fb, _)), Some((frb, _))) = (
-            ctx.crust_buffers(),
-            ctx.uplift.field.as_ref(),
-            ctx.uplift.fronts.as_ref(),
-        ) else {
+    ctx.with_kernel(|ctx, kern: &mut UpliftKernel| {
+        let Some(n) = ctx.crust_buffers().map(|b| b.len) else {
             return Err(GpuError::Kernel {
                 kernel: KERNEL,
-                message: "buffers missing".into(),
+                message: "the crust is not on the device".into(),
             });
         };
-        let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("subduction_uplift bindings"),
-            layout: &ctx.uplift.pipeline.get_bind_group_layout(0),
-            entries: &[
-                entry(0, &ctx.uplift.uniforms),
-                entry(1, &b.elevation_km),
-                entry(2, &b.orogeny),
-                entry(3, &b.orogeny_age_my),
-                entry(4, &b.fold_dir),
-                entry(5, &b.crust_type),
-                entry(6, fb),
-                entry(7, frb),
-            ],
-        });
-        ctx.uplift.bind_group = Some(bg);
-    }
-    let u = UpliftUniforms::new(k, n as u32);
-    let (pipeline, uniforms) = (ctx.uplift.pipeline.clone(), ctx.uplift.uniforms.clone());
-    ctx.upload(&uniforms, bytemuck::bytes_of(&u));
-    let Some(bg) = ctx.uplift.bind_group.clone() else {
-        return Ok(());
-    };
-    ctx.dispatch(KERNEL, &pipeline, &bg, (n as u32).div_ceil(4))
+        if field.overriding_point.len() != n
+            || field.overriding_distance_km.len() != n
+            || field.subducting_point.len() != n
+            || field.subducting_distance_km.len() != n
+        {
+            return Err(GpuError::Kernel {
+                kernel: KERNEL,
+                message: format!("convergence field does not have {n} samples"),
+            });
+        }
+        if let Some(bad) = field
+            .overriding_point
+            .iter()
+            .chain(&field.subducting_point)
+            .find(|&&p| p != NONE && p as usize >= fp.len())
+        {
+            return Err(GpuError::Kernel {
+                kernel: KERNEL,
+                message: format!("front point {bad} out of range ({} points)", fp.len()),
+            });
+        }
+        // Convergence field: once per resampling.
+        if kern.field.as_ref().is_none_or(|f| f.1 != n) {
+            let buf = ctx.storage_buffer("convergence field (od, op, sd, sp)", 16 * n);
+            kern.field = Some((buf, n));
+            kern.field_synced = None;
+            kern.bind_group = None;
+        }
+        if field_tick.is_none() || kern.field_synced != field_tick {
+            let packed: Vec<[u32; 4]> = (0..n)
+                .map(|i| {
+                    [
+                        field.overriding_distance_km[i].to_bits(),
+                        field.overriding_point[i],
+                        field.subducting_distance_km[i].to_bits(),
+                        field.subducting_point[i],
+                    ]
+                })
+                .collect();
+            if let Some((buf, _)) = kern.field.clone() {
+                ctx.upload(&buf, bytemuck::cast_slice(&packed));
+            }
+            kern.field_synced = field_tick;
+        }
+        // Front table: every step.
+        let table = front_table(k, fp);
+        if kern
+            .fronts
+            .as_ref()
+            .is_none_or(|f| f.1 < table.len().max(1))
+        {
+            let cap = table.len().max(1).next_power_of_two();
+            let buf = ctx.storage_buffer("front points", cap * std::mem::size_of::<FrontGpu>());
+            kern.fronts = Some((buf, cap));
+            kern.bind_group = None;
+        }
+        if let Some((buf, _)) = kern.fronts.clone() {
+            ctx.upload(&buf, bytemuck::cast_slice(&table));
+        }
+        if kern.bind_group.is_none() {
+            let (Some(b), Some((fb, _)), Some((frb, _))) = (
+                ctx.crust_buffers(),
+                kern.field.as_ref(),
+                kern.fronts.as_ref(),
+            ) else {
+                return Err(GpuError::Kernel {
+                    kernel: KERNEL,
+                    message: "buffers missing".into(),
+                });
+            };
+            let bg = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("subduction_uplift bindings"),
+                layout: &kern.pipeline.get_bind_group_layout(0),
+                entries: &[
+                    entry(0, &kern.uniforms),
+                    entry(1, &b.elevation_km),
+                    entry(2, &b.orogeny),
+                    entry(3, &b.orogeny_age_my),
+                    entry(4, &b.fold_dir),
+                    entry(5, &b.crust_type),
+                    entry(6, fb),
+                    entry(7, frb),
+                ],
+            });
+            kern.bind_group = Some(bg);
+        }
+        let u = UpliftUniforms::new(k, n as u32);
+        let (pipeline, uniforms) = (kern.pipeline.clone(), kern.uniforms.clone());
+        ctx.upload(&uniforms, bytemuck::bytes_of(&u));
+        let Some(bg) = kern.bind_group.clone() else {
+            return Ok(());
+        };
+        ctx.dispatch(KERNEL, &pipeline, &bg, (n as u32).div_ceil(4))
+    })
 }
 
 /// The fields the kernel writes on the device: elevation, orogeny, orogeny age, fold direction.

@@ -6,7 +6,5 @@ pub mod geotiff;
 pub mod gltf;
 pub mod heightmap;
 pub mod maps;
-pub mod params;
-pub mod plugin_params;
 pub mod save;
 pub mod summary;

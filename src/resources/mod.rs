@@ -1,18 +1,26 @@
 //! Resources of the simulation world: the crust fields, the clock, the plate lookup table used
-//! by per-sample kernels, the phenomenon registry (run-time switches) and step timings.
+//! by per-sample kernels, step timings, the parameters and their schema ([`params`], and the
+//! plugins' [`plugin_params`]), and the save-section API ([`save_section`]).
 
 pub mod convergence;
 pub mod crust;
-pub mod phenomena;
+pub mod params;
 pub mod plate_table;
+pub mod plugin_params;
+pub mod save_section;
 pub mod timings;
 
 pub use convergence::{
     ConvergenceField, FrontPoints, OverridePairs, Suture, Sutures, TerraneField,
 };
 pub use crust::{Crust, CrustType, NO_PLATE, NonFinite, Orogeny};
-pub use phenomena::{Phenomena, PhenomenonInfo, phenomenon_enabled};
+pub use params::{ParamError, ParamKind, ParamSpec, ParamValue, Params};
 pub use plate_table::{PlateState, PlateTable};
+pub use plugin_params::{PluginConfig, PluginParam, PluginParams, PluginParamsAppExt};
+pub use save_section::{
+    LoadError, LoadErrorKind, RawSection, SaveAppExt, SaveError, SaveRegistry, SaveSection,
+    SectionError, SectionReader, SectionWriter,
+};
 pub use timings::StepTimings;
 
 use bevy_ecs::prelude::*;
@@ -51,3 +59,18 @@ pub struct CrustStats {
 /// Id that the next new plate gets.
 #[derive(Resource, Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct NextPlateId(pub u32);
+
+/// What was done to a planet, in order: one line per command (generate, resume...), with the
+/// step at which it took effect. Saved as the `core.history` section.
+#[derive(Resource, Clone, Debug, Default, PartialEq, Eq)]
+pub struct CommandHistory {
+    /// `(step, command line)`, oldest first.
+    pub entries: Vec<(u64, String)>,
+}
+
+impl CommandHistory {
+    /// Appends a command taking effect at `step`.
+    pub fn record(&mut self, step: u64, command: impl Into<String>) {
+        self.entries.push((step, command.into()));
+    }
+}

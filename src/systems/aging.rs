@@ -5,7 +5,7 @@ use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 
 use crate::gpu::{FieldMask, GpuContext, run_or_record};
-use crate::io::params::Params;
+use crate::resources::params::Params;
 use crate::resources::{Crust, Orogeny};
 
 /// The CPU kernel (reference of `shaders/aging.wgsl`): ages every sample by `dt_my`, in place.

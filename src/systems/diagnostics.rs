@@ -7,11 +7,9 @@ use rayon::prelude::*;
 
 use crate::components::Plate;
 use crate::geometry::SphereMesh;
+use crate::gpu::crust_reduce::REDUCE_CHUNK;
 use crate::gpu::{FieldMask, GpuContext};
 use crate::resources::{Crust, CrustStats, CrustType, NonFinite};
-
-/// Chunk size of deterministic reductions.
-pub const REDUCE_CHUNK: usize = 8192;
 
 /// Area-weighted land and continental fractions and the elevation range of a crust.
 pub fn crust_stats(mesh: &SphereMesh, crust: &Crust) -> CrustStats {

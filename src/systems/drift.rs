@@ -4,7 +4,7 @@ use bevy_ecs::prelude::*;
 use glam::DQuat;
 
 use crate::components::{PlateFrame, PlateMotion};
-use crate::io::params::Params;
+use crate::resources::params::Params;
 
 /// Turns every plate by one time step.
 pub fn drift_plates(params: Res<Params>, mut plates: Query<(&PlateMotion, &mut PlateFrame)>) {

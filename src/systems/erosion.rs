@@ -13,8 +13,9 @@
 use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 
+use crate::gpu::erosion::ErosionRates;
 use crate::gpu::{FieldMask, GpuContext, run_or_record};
-use crate::io::params::Params;
+use crate::resources::params::Params;
 use crate::resources::{Crust, CrustType};
 
 /// New elevation of one sample after one step of erosion, damping and accretion.
@@ -38,34 +39,6 @@ pub fn erode_sample(z: f32, crust_type: CrustType, p: &ErosionRates) -> f32 {
         }
     };
     out as f32
-}
-
-/// The per-step constants of [`erode_sample`].
-#[derive(Clone, Copy, Debug)]
-pub struct ErosionRates {
-    pub(crate) z_c: f64,
-    pub(crate) z_a: f64,
-    pub(crate) z_t: f64,
-    pub(crate) erosion_km: f64,
-    pub(crate) damping_factor: f64,
-    pub(crate) sediment_km: f64,
-}
-
-impl ErosionRates {
-    /// Rates for one time step of the given parameters.
-    pub fn new(params: &Params) -> Self {
-        let dt = params.time.time_step_my;
-        let o = &params.ocean;
-        Self {
-            z_c: params.continent.max_elevation_km,
-            z_a: o.abyssal_elevation_km,
-            z_t: o.trench_elevation_km,
-            erosion_km: params.continent.erosion_mm_per_yr * dt,
-            damping_factor: (-(o.damping_mm_per_yr / o.trench_elevation_km.abs().max(1e-9)) * dt)
-                .exp(),
-            sediment_km: o.sediment_accretion_mm_per_yr * dt,
-        }
-    }
 }
 
 /// The CPU kernel (reference of `shaders/erosion.wgsl`): one step of erosion, damping and

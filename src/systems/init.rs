@@ -12,8 +12,8 @@ use rayon::prelude::*;
 
 use crate::components::{PlateId, PlateMotion};
 use crate::geometry::{MeshError, SphereMesh, angle_between};
-use crate::io::params::Params;
 use crate::random::{fbm, hash3, stream, unit_f64, unit_vector, vector_fbm};
+use crate::resources::params::Params;
 use crate::resources::{Crust, CrustType, NO_PLATE, Orogeny};
 use crate::systems::oceanic_crust::ocean_floor_age_my;
 use crate::systems::resample::defragment_plates;

@@ -21,7 +21,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::geometry::SphereMesh;
-use crate::io::params::Params;
+use crate::resources::params::Params;
 use crate::resources::{Crust, CrustType, Orogeny};
 use crate::systems::resample::{GapSample, ResampleWork};
 

@@ -40,8 +40,8 @@ use crate::components::{
 };
 use crate::geometry::SphereMesh;
 use crate::geometry::spherical::{angle_between, tangent_basis, triple};
-use crate::io::params::Params;
 use crate::random::{SimRng, hash3, stream, vector_fbm};
+use crate::resources::params::Params;
 use crate::resources::{Crust, CrustType, NextPlateId, ResampleRequest, SimClock};
 use crate::systems::resample::plate_geometry;
 

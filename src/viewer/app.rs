@@ -13,8 +13,8 @@ use eframe::egui;
 use egui::{Color32, ColorImage, Rect, Sense, Stroke, TextureHandle, TextureOptions, Vec2};
 
 use crate::commands::{Command, CrustKind, LatLon, PlateRef};
-use crate::io::params::{ParamKind, ParamValue, Params};
 use crate::plugins::TectonicSystems;
+use crate::resources::params::{ParamKind, ParamValue, Params};
 
 use super::map::{self, BaseLayer, VectorLayers};
 use super::worker::{Request, SimHandle, Snapshot};
@@ -1081,7 +1081,7 @@ impl ViewerApp {
                     }
                 });
                 let mut section = "";
-                let specs: Vec<crate::io::params::ParamSpec> = Params::schema()
+                let specs: Vec<crate::resources::params::ParamSpec> = Params::schema()
                     .iter()
                     .copied()
                     .chain(s.plugin_params.iter().map(|p| p.spec))
@@ -1132,7 +1132,7 @@ impl ViewerApp {
             };
             if key.starts_with("plugins.") {
                 let current = s.plugin_params.iter().find(|p| p.spec.key == key);
-                match crate::io::params::check_value(spec, bounds(spec), value) {
+                match crate::resources::params::check_value(spec, bounds(spec), value) {
                     Err(e) => {
                         self.param_errors.insert(key.clone(), e.to_string());
                     }
@@ -1306,7 +1306,7 @@ fn param_texts(s: &Snapshot) -> BTreeMap<String, String> {
     out
 }
 
-fn bounds(spec: &crate::io::params::ParamSpec) -> (ParamValue, ParamValue) {
+fn bounds(spec: &crate::resources::params::ParamSpec) -> (ParamValue, ParamValue) {
     match spec.kind {
         ParamKind::Float => (ParamValue::Float(spec.min), ParamValue::Float(spec.max)),
         ParamKind::Int => (

@@ -17,12 +17,13 @@ use crate::components::{Plate, PlateFrame, SubductionFront, Terrane};
 use crate::geometry::SphereMesh;
 use crate::geometry::spherical::to_lat_lon_deg;
 use crate::io::maps::{Raster, write_all_maps};
-use crate::io::params::{ParamValue, Params};
-use crate::io::plugin_params::PluginParam;
 use crate::io::save::{self, CommandHistory};
 use crate::io::summary::CrustSampler;
+use crate::plugins::PhenomenonInfo;
 use crate::plugins::TectonicSystems;
-use crate::resources::{Crust, CrustStats, FrontPoints, PhenomenonInfo};
+use crate::resources::params::{ParamValue, Params};
+use crate::resources::plugin_params::PluginParam;
+use crate::resources::{Crust, CrustStats, FrontPoints};
 
 /// Width of the map lookup grid (pixels); the height is half.
 pub const MAP_WIDTH: u32 = 1024;

@@ -35,7 +35,7 @@ use crate::prelude::*;
 pub const CONTINENTAL_HEIGHT_FRACTION: f64 = 0.25;
 
 /// The phenomenon name (for `--enable hotspots`).
-pub const HOTSPOTS: &str = "hotspots";
+pub const HOTSPOTS: Phenomenon = Phenomenon::new("hotspots");
 
 /// The random stream of hotspot positions ("HOTSPOTS" in ASCII); no core stream uses it.
 pub const HOTSPOT_STREAM: u64 = 0x484f_5453_504f_5453;
@@ -219,12 +219,12 @@ impl Plugin for HotspotPlugin {
                 remember_frames.run_if(any_with_component::<Edifice>),
             )
                 .chain()
-                .in_set(TectonicSystems::Aging),
+                .in_set(AgingSystems::After),
         );
         app.add_systems(
             AfterResample,
             carry_edifices
-                .in_set(AfterResampleSystems::Fronts)
+                .in_set(AfterResampleSystems::Carry)
                 .run_if(any_with_component::<Edifice>),
         );
     }
@@ -529,7 +529,7 @@ fn carry_edifices(
     }
 }
 
-fn save_state(world: &mut World, w: &mut SectionWriter) -> Result<(), String> {
+fn save_state(world: &mut World, w: &mut SectionWriter) -> Result<(), SectionError> {
     let state = world.resource::<HotspotState>().clone();
     w.u8(u8::from(state.placed));
     w.u64(state.next_serial);
@@ -567,23 +567,23 @@ fn save_state(world: &mut World, w: &mut SectionWriter) -> Result<(), String> {
     Ok(())
 }
 
-fn unit(r: &mut SectionReader, what: &str) -> Result<DVec3, String> {
+fn unit(r: &mut SectionReader, what: &str) -> Result<DVec3, SectionError> {
     let v = DVec3::new(
         r.finite_f64(what)?,
         r.finite_f64(what)?,
         r.finite_f64(what)?,
     );
     if (v.length() - 1.0).abs() > 1e-6 {
-        return Err(format!("{what} is not a unit vector"));
+        return Err(format!("{what} is not a unit vector").into());
     }
     Ok(v)
 }
 
-fn load_state(world: &mut World, r: &mut SectionReader, _v: u32) -> Result<(), String> {
+fn load_state(world: &mut World, r: &mut SectionReader, _v: u32) -> Result<(), SectionError> {
     let placed = match r.u8()? {
         0 => false,
         1 => true,
-        b => return Err(format!("placed flag {b} is neither 0 nor 1")),
+        b => return Err(format!("placed flag {b} is neither 0 nor 1").into()),
     };
     let next_serial = r.u64()?;
     let n = r.u32()? as usize;
@@ -636,7 +636,8 @@ fn load_state(world: &mut World, r: &mut SectionReader, _v: u32) -> Result<(), S
             return Err(format!(
                 "edifice {} names a serial or plate that does not exist",
                 e.serial
-            ));
+            )
+            .into());
         }
         list.push(e);
     }

@@ -13,20 +13,27 @@
 //! # Ok::<(), tectonic_planets::SimError>(())
 //! ```
 
+pub mod core_sections;
+mod persist;
+
 use std::time::Instant;
 
 use bevy_app::{App, PluginGroup};
 use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::{ScheduleLabel, Schedules};
 
 use crate::components::{Plate, PlateBounds, PlateFrame, PlateMesh, PlateMotion, PlateStats};
 use crate::geometry::{MeshError, SphereMesh};
-use crate::io::params::{ParamError, Params};
-use crate::io::plugin_params::{PluginConfig, PluginParams};
-use crate::plugins::{TectonicPlugins, TectonicSchedulePlugin, TectonicStep};
+use crate::plugins::oceanic_crust::OCEANIC_CRUST;
+use crate::plugins::{
+    AfterResample, Phenomena, PhenomenonInfo, TectonicPlugins, TectonicSchedulePlugin,
+    TectonicStep, UnknownPhenomenon,
+};
 use crate::random::StableHasher;
+use crate::resources::params::{ParamError, Params};
+use crate::resources::plugin_params::{PluginConfig, PluginParams};
 use crate::resources::{
-    Crust, CrustStats, NextPlateId, NonFinite, Phenomena, PhenomenonInfo, PlateTable,
-    ResampleRequest, SimClock, StepTimings,
+    Crust, CrustStats, NextPlateId, NonFinite, PlateTable, ResampleRequest, SimClock, StepTimings,
 };
 use crate::systems::diagnostics::{CrustHealth, crust_stats};
 use crate::systems::{init, oceanic_crust, resample};
@@ -49,14 +56,35 @@ pub enum SimError {
         source: NonFinite,
     },
     /// A phenomenon name that no plugin registered.
-    #[error("{0}")]
-    UnknownPhenomenon(String),
+    #[error(transparent)]
+    UnknownPhenomenon(#[from] UnknownPhenomenon),
+    /// The plugins' systems cannot be scheduled: two systems that touch the same data are not
+    /// ordered, or the ordering has a cycle (a plugin's bug; the message names the sets).
+    #[error("the step schedule cannot be built: {0}")]
+    Schedule(String),
     /// A time or count argument that makes no sense.
     #[error("{0}")]
     BadArgument(String),
     /// The GPU backend could not be set up, or a kernel failed.
     #[error(transparent)]
     Gpu(#[from] crate::gpu::GpuError),
+}
+
+/// Builds the step schedules now, so that plugins whose systems cannot be ordered (an ambiguity,
+/// which the schedules refuse, or a cycle) are reported here as an error instead of a panic at
+/// the first step.
+fn build_schedules(app: &mut App) -> Result<(), String> {
+    app.world_mut()
+        .resource_scope(|world, mut schedules: Mut<Schedules>| {
+            for label in [TectonicStep.intern(), AfterResample.intern()] {
+                if let Some(schedule) = schedules.get_mut(label) {
+                    schedule
+                        .initialize(world)
+                        .map_err(|e| format!("{label:?}: {e}"))?;
+                }
+            }
+            Ok(())
+        })
 }
 
 /// A running planet: the ECS world and its step schedule.
@@ -88,10 +116,11 @@ impl Simulation {
             .insert_resource(crust)
             .insert_resource(NextPlateId(next_id));
         app.add_plugins(TectonicSchedulePlugin);
-        app.add_plugins(crate::io::save::CoreSavePlugin);
+        app.add_plugins(core_sections::CoreSavePlugin);
         app.add_plugins(plugins);
         app.finish();
         app.cleanup();
+        build_schedules(&mut app).map_err(SimError::Schedule)?;
         app.init_resource::<PluginParams>();
         if let Some(e) = app.world().resource::<PluginParams>().invalid_declaration() {
             return Err(SimError::BadArgument(e.to_string()));
@@ -101,7 +130,7 @@ impl Simulation {
             world.spawn(Plate::bundle(p.id, p.motion));
         }
         resample::rebuild_plate_entities(world, &[]);
-        let _ = world.try_run_schedule(crate::plugins::AfterResample);
+        let _ = world.try_run_schedule(AfterResample);
         timings.record("initial_planet", t1.elapsed());
         *world.resource_mut::<StepTimings>() = timings;
         let mut sim = Self { app };
@@ -112,7 +141,11 @@ impl Simulation {
     /// A simulation with `params`, `mesh`, the schedule and `plugins` but no initial planet: an
     /// empty crust and no plates. Used by the save loader, which fills in the rest of the state
     /// through the registered save sections and then calls [`Self::finish_load`].
-    pub(crate) fn from_parts(params: Params, mesh: SphereMesh, plugins: impl PluginGroup) -> Self {
+    pub(crate) fn from_parts(
+        params: Params,
+        mesh: SphereMesh,
+        plugins: impl PluginGroup,
+    ) -> Result<Self, String> {
         let n = mesh.len();
         let mut app = App::empty();
         app.insert_resource(params)
@@ -120,12 +153,13 @@ impl Simulation {
             .insert_resource(Crust::with_len(n))
             .insert_resource(NextPlateId(0));
         app.add_plugins(TectonicSchedulePlugin);
-        app.add_plugins(crate::io::save::CoreSavePlugin);
+        app.add_plugins(core_sections::CoreSavePlugin);
         app.add_plugins(plugins);
         app.finish();
         app.cleanup();
+        build_schedules(&mut app)?;
         app.init_resource::<PluginParams>();
-        Self { app }
+        Ok(Self { app })
     }
 
     /// Refreshes the derived resources after a load.
@@ -379,7 +413,7 @@ impl Simulation {
             .max(world.resource::<NextPlateId>().0);
         world.resource_mut::<NextPlateId>().0 = next;
         resample::rebuild_plate_entities(world, &[]);
-        let _ = world.try_run_schedule(crate::plugins::AfterResample);
+        let _ = world.try_run_schedule(AfterResample);
         self.refresh_stats();
         Ok(())
     }
@@ -416,7 +450,7 @@ impl Simulation {
             .app
             .world()
             .resource::<Phenomena>()
-            .is_enabled("oceanic_crust");
+            .is_enabled(OCEANIC_CRUST.name());
         let world = self.app.world();
         let mesh = world.resource::<SphereMesh>();
         let crust = world.resource::<Crust>();

@@ -13,11 +13,11 @@ use std::path::Path;
 use bevy_app::App;
 use bevy_ecs::prelude::*;
 
-use crate::io::params::{
+use crate::resources::params::{
     PLUGINS_TABLE, ParamError, ParamKind, ParamSpec, ParamValue, check_value, describe_toml,
     from_toml_value, levenshtein, parse_toml_table, read_param_file, suggest_threshold,
 };
-use crate::io::save::{SaveSection, SectionReader, SectionWriter};
+use crate::resources::save_section::{SaveSection, SectionError, SectionReader, SectionWriter};
 
 /// One registered plugin parameter and its current value.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -83,7 +83,7 @@ impl PluginParams {
             return Err(format!(
                 "plugin parameter \"{}\" must have a key plugins.<plugin>.<name> made of its section \"{}\" and name \"{}\"",
                 spec.key, spec.section, spec.name
-            ));
+            ).into());
         }
         let kind_ok = matches!(
             (spec.kind, spec.default),
@@ -95,7 +95,8 @@ impl PluginParams {
             return Err(format!(
                 "plugin parameter \"{}\" has a default of the wrong kind or an empty range",
                 spec.key
-            ));
+            )
+            .into());
         }
         check_value(spec, bounds_of(spec), spec.default)
             .map(|_| ())
@@ -155,7 +156,7 @@ impl PluginParams {
     }
 
     /// Sets `key` after checking kind, finiteness and range (the same rules and messages as
-    /// [`Params::set`](crate::io::params::Params::set)); on error nothing changes.
+    /// [`Params::set`](crate::resources::params::Params::set)); on error nothing changes.
     pub fn set(&mut self, key: &str, value: ParamValue) -> Result<(), ParamError> {
         let suggestion = self.suggest(key);
         let Some(entry) = self.entries.iter_mut().find(|e| e.spec.key == key) else {
@@ -203,7 +204,7 @@ impl PluginParams {
     }
 
     /// The parameters as commented TOML tables `[plugins.<plugin>]`, in the style of
-    /// [`Params::to_commented_toml`](crate::io::params::Params::to_commented_toml) (empty when no
+    /// [`Params::to_commented_toml`](crate::resources::params::Params::to_commented_toml) (empty when no
     /// plugin declared any). Parses back with [`PluginConfig::from_toml_str`].
     pub fn to_commented_toml(&self) -> String {
         let mut out = String::new();
@@ -239,7 +240,7 @@ pub struct PluginConfig {
 
 impl PluginConfig {
     /// Reads the `[plugins.<plugin>]` tables of TOML text (the other tables are left to
-    /// [`Params`](crate::io::params::Params)). A `plugins` value that is not a table of tables
+    /// [`Params`](crate::resources::params::Params)). A `plugins` value that is not a table of tables
     /// is refused.
     pub fn from_toml_str(text: &str) -> Result<Self, ParamError> {
         let table = parse_toml_table(text)?;
@@ -312,7 +313,7 @@ pub fn plugin_params_section() -> SaveSection {
     }
 }
 
-fn save_plugin_params(world: &mut World, w: &mut SectionWriter) -> Result<(), String> {
+fn save_plugin_params(world: &mut World, w: &mut SectionWriter) -> Result<(), SectionError> {
     let entries: Vec<PluginParam> = world
         .get_resource::<PluginParams>()
         .map(|p| p.entries.clone())
@@ -338,12 +339,16 @@ fn save_plugin_params(world: &mut World, w: &mut SectionWriter) -> Result<(), St
     Ok(())
 }
 
-fn load_plugin_params(world: &mut World, r: &mut SectionReader, _v: u32) -> Result<(), String> {
+fn load_plugin_params(
+    world: &mut World,
+    r: &mut SectionReader,
+    _v: u32,
+) -> Result<(), SectionError> {
     let n = r.u32()?;
     let mut values = Vec::new();
     for _ in 0..n {
         if r.remaining() < 13 {
-            return Err(format!("{n} values announced, the data ends early"));
+            return Err(format!("{n} values announced, the data ends early").into());
         }
         let key = r.str()?.to_string();
         let value = match r.u8()? {
@@ -352,9 +357,9 @@ fn load_plugin_params(world: &mut World, r: &mut SectionReader, _v: u32) -> Resu
             2 => match r.u64()? {
                 0 => ParamValue::Bool(false),
                 1 => ParamValue::Bool(true),
-                b => return Err(format!("\"{key}\": boolean {b} is neither 0 nor 1")),
+                b => return Err(format!("\"{key}\": boolean {b} is neither 0 nor 1").into()),
             },
-            k => return Err(format!("\"{key}\": unknown value kind {k}")),
+            k => return Err(format!("\"{key}\": unknown value kind {k}").into()),
         };
         values.push((key, value));
     }
@@ -452,7 +457,7 @@ mod tests {
         // The core parameters ignore the plugin tables, and the plugin config the core ones.
         let both = format!("[planet]\nsamples = 2000\n{text}");
         assert_eq!(
-            crate::io::params::Params::from_toml_str(&both)
+            crate::resources::params::Params::from_toml_str(&both)
                 .unwrap()
                 .planet
                 .samples,

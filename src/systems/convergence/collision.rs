@@ -1,0 +1,313 @@
+//! Continental collisions (paper §4.2): detection of terranes pushed past the interpenetration
+//! threshold, sutures at the next resampling, and the Himalayan surge around each sutured
+//! terrane (CPU kernel [`collision_uplift_cpu`], GPU kernel [`crate::gpu::collision_uplift`]).
+//! See [`super`] for the model.
+#![allow(clippy::needless_range_loop)]
+
+use bevy_ecs::prelude::*;
+use glam::DVec3;
+use rayon::prelude::*;
+
+use super::propagate_nearest;
+use crate::components::{Plate, PlateBounds, PlateFrame, PlateMotion, PlateStats};
+use crate::geometry::SphereMesh;
+use crate::gpu::collision_uplift::CollisionSurge;
+use crate::gpu::{GpuContext, run_or_record};
+use crate::resources::convergence::NONE;
+use crate::resources::params::Params;
+use crate::resources::{
+    ConvergenceField, Crust, CrustType, FrontPoints, Orogeny, PlateTable, ResampleRequest, Suture,
+    Sutures, TerraneField,
+};
+
+/// Finds terranes colliding now: continental crust of a subducting plate more than
+/// `threshold_km` past a front whose overriding crust is continental too. Queues a suture for
+/// the smaller terrane of each pair in contact and asks for a resampling.
+#[allow(clippy::too_many_arguments)]
+pub fn find_collisions(
+    threshold_km: f64,
+    lookahead_my: f64,
+    params: &Params,
+    crust: &Crust,
+    fp: &FrontPoints,
+    field: &ConvergenceField,
+    terranes: &TerraneField,
+    table: &PlateTable,
+    sutures: &mut Sutures,
+) -> bool {
+    if fp.is_empty()
+        || field.subducting_point.len() != crust.len()
+        || terranes.terrane.len() != crust.len()
+    {
+        return false;
+    }
+    let mut contacts: Vec<(u32, u32, u32, u32)> = (0..crust.len())
+        .into_par_iter()
+        .with_min_len(4096)
+        .filter_map(|i| {
+            let k = field.subducting_point[i];
+            if k == NONE || crust.crust_type[i] != CrustType::Continental {
+                return None;
+            }
+            let k = k as usize;
+            // Where the crust will be after `lookahead_my` more of convergence (the collision
+            // check at the start of a step looks one step ahead, as Driftworld does, so that the
+            // overlap at the resampling that follows is about the threshold, not a step more).
+            let d = field.subducting_distance_km[i] as f64
+                - fp.converged_km[k] as f64
+                - fp.convergence_km_per_my[k].max(0.0) as f64 * lookahead_my;
+            if d >= -threshold_km || (threshold_km <= 0.0 && d >= 0.0) {
+                return None;
+            }
+            let os = fp.sample[k] as usize;
+            if crust.crust_type[os] != CrustType::Continental {
+                return None;
+            }
+            let (tb, ta) = (terranes.terrane[i], terranes.terrane[os]);
+            if tb == NONE || ta == NONE {
+                return None;
+            }
+            let min_area = params.collision.min_terrane_km2;
+            if terranes.area_km2[tb as usize] < min_area
+                || terranes.area_km2[ta as usize] < min_area
+            {
+                return None;
+            }
+            Some((tb, ta, fp.subducting[k], fp.overriding[k]))
+        })
+        .collect();
+    contacts.sort_unstable();
+    contacts.dedup();
+    let r_km = params.planet.radius_km;
+    let mut any = false;
+    for (tb, ta, plate_b, plate_a) in contacts {
+        let (moving, from, to) = if terranes.area_km2[ta as usize] < terranes.area_km2[tb as usize]
+        {
+            (ta, plate_a, plate_b)
+        } else {
+            (tb, plate_b, plate_a)
+        };
+        if sutures.pending.iter().any(|s| s.terrane == moving) {
+            continue;
+        }
+        let (Some(pf), Some(pt)) = (table.get(from), table.get(to)) else {
+            continue;
+        };
+        let centroid = pf.world_from_plate * terranes.centroid[moving as usize];
+        let v = (pf.motion.velocity_km_per_my(centroid, r_km)
+            - pt.motion.velocity_km_per_my(centroid, r_km))
+        .length();
+        sutures.pending.push(Suture {
+            terrane: moving,
+            from_plate: from,
+            to_plate: to,
+            area_km2: terranes.area_km2[moving as usize],
+            relative_speed_km_per_my: v,
+            centroid_world: centroid,
+        });
+        any = true;
+    }
+    any
+}
+
+/// What the collision checks read.
+#[derive(bevy_ecs::system::SystemParam)]
+pub struct CollisionInputs<'w, 's> {
+    params: Res<'w, Params>,
+    crust: Res<'w, Crust>,
+    fp: Res<'w, FrontPoints>,
+    field: Res<'w, ConvergenceField>,
+    terranes: Res<'w, TerraneField>,
+    plates: Query<
+        'w,
+        's,
+        (
+            &'static Plate,
+            &'static PlateMotion,
+            &'static PlateFrame,
+            &'static PlateBounds,
+            &'static PlateStats,
+        ),
+    >,
+}
+
+impl CollisionInputs<'_, '_> {
+    fn find(&self, threshold_km: f64, lookahead_my: f64, sutures: &mut Sutures) -> bool {
+        let table = PlateTable::from_query(&self.plates);
+        find_collisions(
+            threshold_km,
+            lookahead_my,
+            &self.params,
+            &self.crust,
+            &self.fp,
+            &self.field,
+            &self.terranes,
+            &table,
+            sutures,
+        )
+    }
+}
+
+/// Collision detection at the start of a step (threshold `collision.interpenetration_km`,
+/// looking one step ahead); asks for a resampling when a collision fires.
+pub fn detect_collisions(
+    inputs: CollisionInputs,
+    mut sutures: ResMut<Sutures>,
+    mut request: ResMut<ResampleRequest>,
+) {
+    let t = inputs.params.collision.interpenetration_km;
+    let ahead = inputs.params.time.time_step_my;
+    if inputs.find(t, ahead, &mut sutures) {
+        request.0 = true;
+    }
+}
+
+/// Just before a resampling: any continental crust already under another plate's continental
+/// crust collides now, whatever its depth, so the resampling drops none of it.
+pub fn collide_before_resample(inputs: CollisionInputs, mut sutures: ResMut<Sutures>) {
+    inputs.find(0.0, 0.0, &mut sutures);
+}
+
+/// After a resampling that applied sutures: the collision surge around each sutured terrane.
+pub fn collision_uplift(world: &mut World) {
+    let applied = std::mem::take(&mut world.resource_mut::<Sutures>().applied);
+    if !applied.is_empty() {
+        world.resource_mut::<Sutures>().last_applied =
+            applied.iter().map(|a| a.0.clone()).collect();
+    }
+    if applied.is_empty() {
+        return;
+    }
+    let params = world.resource::<Params>().clone();
+    let crust_tick = world.get_resource_ref::<Crust>().map(|c| c.last_changed());
+    let mut crust = world.remove_resource::<Crust>().unwrap_or_default();
+    // On the GPU backend the surges are applied on the device after every distance is known
+    // (the distances depend only on the plates, which the surges do not change).
+    let mut gpu = world.remove_resource::<GpuContext>();
+    let mut surges = Vec::new();
+    let mesh = world.resource::<SphereMesh>();
+    let r_km = params.planet.radius_km;
+    let c = &params.collision;
+    let a0 = 4.0 * std::f64::consts::PI * r_km * r_km / params.init.plates as f64;
+    let v0 = params.plates.max_speed_mm_per_yr;
+    let z_c = params.continent.max_elevation_km;
+    let mut dist = vec![f32::INFINITY; mesh.len()];
+    let mut label = vec![NONE; mesh.len()];
+    let mut settled = Vec::new();
+    for (suture, samples) in &applied {
+        if samples.is_empty() {
+            continue;
+        }
+        let xi = (suture.relative_speed_km_per_my / v0 * suture.area_km2 / a0).sqrt();
+        let r = c.distance_km * xi.min(1.0);
+        let peak = if c.max_uplift_km > 0.0 {
+            c.max_uplift_km
+                * (1.0 - (-c.coefficient_per_km * suture.area_km2 / c.max_uplift_km).exp())
+        } else {
+            0.0
+        };
+        let seeds: Vec<(u32, u32)> = samples.iter().map(|&s| (s, s)).collect();
+        dist.iter_mut().for_each(|d| *d = f32::INFINITY);
+        let to = suture.to_plate;
+        let plate = &crust.plate;
+        propagate_nearest(
+            mesh,
+            &seeds,
+            |l| mesh.positions[l as usize],
+            |s, _| plate[s] == to,
+            r / r_km,
+            &mut dist,
+            &mut label,
+            &mut settled,
+        );
+        let surge = CollisionSurge {
+            radius_km: r,
+            peak_km: peak,
+            planet_radius_km: r_km,
+            max_elevation_km: z_c,
+            centroid: suture.centroid_world,
+        };
+        match gpu {
+            Some(_) => surges.push((surge, dist.clone())),
+            None => collision_uplift_cpu(&surge, &mesh.positions, &dist, &mut crust),
+        }
+        tracing::debug!(
+            terrane = suture.terrane,
+            from = suture.from_plate,
+            to = suture.to_plate,
+            area_km2 = suture.area_km2,
+            radius_km = r,
+            uplift_km = peak,
+            "collision"
+        );
+    }
+    let mut synced = false;
+    if let Some(g) = gpu.as_mut().filter(|_| !surges.is_empty()) {
+        // The surged fields stay on the device (lazy host sync, stage 3 of
+        // docs/gpu-residency.md): the CPU systems that follow pull what they read.
+        let done = run_or_record(g, |g| {
+            g.sync_crust(&crust, crust_tick)?;
+            crate::gpu::collision_uplift::collision_uplift_gpu(g, &mesh.positions, &surges)?;
+            g.note_device_write(crate::gpu::collision_uplift::WRITES, &mut crust)
+        });
+        synced = done;
+        if !done {
+            for (surge, dist) in &surges {
+                collision_uplift_cpu(surge, &mesh.positions, dist, &mut crust);
+            }
+        }
+    }
+    world.insert_resource(crust);
+    if let Some(mut g) = gpu {
+        if synced {
+            g.mark_crust_synced(world.resource_ref::<Crust>().last_changed());
+        }
+        world.insert_resource(g);
+    }
+}
+
+/// The CPU kernel (reference of `shaders/collision_uplift.wgsl`): one collision surge on every
+/// sample, in place. `dist` is each sample's great-circle distance (radians) to the sutured
+/// terrane through its new plate, infinite where the surge does not reach; `positions` are the
+/// reference positions. Continental samples rise by Δz₀·(1 − (d/r)²)² (capped at z_c); where
+/// the rise exceeds 1 m they get Himalayan orogeny, orogeny age 0 and a fold direction pointing
+/// away from the centroid. `positions` and `dist` must have one entry per sample of `crust`.
+pub fn collision_uplift_cpu(
+    s: &CollisionSurge,
+    positions: &[DVec3],
+    dist: &[f32],
+    crust: &mut Crust,
+) {
+    let (r, peak, r_km, z_c, q) = (
+        s.radius_km,
+        s.peak_km,
+        s.planet_radius_km,
+        s.max_elevation_km,
+        s.centroid,
+    );
+    for i in 0..positions.len().min(dist.len()).min(crust.len()) {
+        if !dist[i].is_finite() {
+            continue;
+        }
+        let d = if r > 0.0 {
+            dist[i] as f64 * r_km / r
+        } else {
+            0.0
+        };
+        let dz = peak * (1.0 - d * d).max(0.0).powi(2);
+        if dz <= 0.0 || crust.crust_type[i] != CrustType::Continental {
+            continue;
+        }
+        crust.elevation_km[i] = (crust.elevation_km[i] as f64 + dz).min(z_c) as f32;
+        if dz > 1e-3 && crust.crust_type[i] == CrustType::Continental {
+            crust.orogeny[i] = Orogeny::Himalayan;
+            crust.orogeny_age_my[i] = 0.0;
+            let p = positions[i];
+            let away = p - q;
+            let f = (away - p * p.dot(away))
+                .try_normalize()
+                .unwrap_or(DVec3::ZERO);
+            crust.fold_dir[i] = [f.x as f32, f.y as f32, f.z as f32];
+        }
+    }
+}

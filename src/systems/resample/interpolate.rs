@@ -1,0 +1,293 @@
+//! Stage 2 of a resampling: every field of the covering plate interpolated at each sample
+//! ([`interpolate`], the CPU reference of `shaders/resample_interpolate.wgsl`), and continental
+//! crust that went under another plate displaced rather than lost. See [`super`].
+#![allow(clippy::needless_range_loop)]
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use super::*;
+use crate::geometry::SphereMesh;
+use crate::resources::params::Params;
+use crate::resources::{Crust, CrustType, NO_PLATE, PlateTable};
+
+/// Interpolates every field of `old` at the sources into `next` (gap samples get zeros and
+/// `NO_PLATE`). Scalars are barycentric; the crust type is a weighted vote; other categories
+/// come from the nearest vertex; direction
+/// fields are interpolated in the plate frame, rotated to the world and projected onto the
+/// tangent plane.
+pub fn interpolate(
+    mesh: &SphereMesh,
+    old: &Crust,
+    table: &PlateTable,
+    sources: &[SampleSource],
+    next: &mut Crust,
+) {
+    next.resize(mesh.len());
+    let Crust {
+        elevation_km,
+        thickness_km,
+        crust_type,
+        age_my,
+        ridge_dir,
+        orogeny,
+        orogeny_age_my,
+        fold_dir,
+        plate,
+    } = next;
+    (
+        elevation_km.par_iter_mut(),
+        thickness_km.par_iter_mut(),
+        crust_type.par_iter_mut(),
+        age_my.par_iter_mut(),
+        ridge_dir.par_iter_mut(),
+        orogeny.par_iter_mut(),
+        orogeny_age_my.par_iter_mut(),
+        fold_dir.par_iter_mut(),
+        plate.par_iter_mut(),
+        sources.par_iter(),
+        mesh.positions.par_iter(),
+    )
+        .into_par_iter()
+        .with_min_len(1024)
+        .for_each(|(z, e, ct, age, rd, og, oga, fd, pl, src, &q)| {
+            if src.is_gap() {
+                *z = 0.0;
+                *e = 0.0;
+                *ct = CrustType::Oceanic;
+                *age = 0.0;
+                *rd = [0.0; 3];
+                *og = Default::default();
+                *oga = 0.0;
+                *fd = [0.0; 3];
+                *pl = NO_PLATE;
+                return;
+            }
+            let t = mesh.triangles[src.triangle as usize];
+            let v = [t[0] as usize, t[1] as usize, t[2] as usize];
+            let plate_state = &table.plates[src.slot as usize];
+            // A vertex of another plate carries valid data here only if that plate moved exactly
+            // like the covering one (same frame); otherwise its crust would be copied to where it
+            // is not (smearing continental margins across divergent boundaries at every
+            // resampling), so only the covering plate's vertices and its co-moving neighbours'
+            // count.
+            let mut w_all = src.weights.map(|w| w as f64);
+            let valid = |k: usize| {
+                let p = old.plate[v[k]];
+                p == plate_state.id
+                    || table
+                        .get(p)
+                        .is_some_and(|o| o.world_from_plate == plate_state.world_from_plate)
+            };
+            let kept: f64 = (0..3).filter(|&k| valid(k)).map(|k| w_all[k]).sum();
+            if kept > 0.0 && kept < 1.0 {
+                for k in 0..3 {
+                    w_all[k] = if valid(k) { w_all[k] / kept } else { 0.0 };
+                }
+            }
+            // Crust type by weighted vote (the 0.5 level of the interpolated indicator): smoother
+            // coastlines than the nearest vertex, which roughens them at every resampling.
+            let cont: f64 = (0..3)
+                .filter(|&k| old.crust_type[v[k]] == CrustType::Continental)
+                .map(|k| w_all[k])
+                .sum();
+            let out_type = if cont > 0.5 {
+                CrustType::Continental
+            } else {
+                CrustType::Oceanic
+            };
+            // Scalars are interpolated over the vertices of the sample's own crust type only, so
+            // a coast never mixes trench depths into continents or mountains into the ocean.
+            let same = if out_type == CrustType::Continental {
+                cont
+            } else {
+                1.0 - cont
+            };
+            let w = if same > 0.0 {
+                let mut m = [0.0; 3];
+                for k in 0..3 {
+                    if old.crust_type[v[k]] == out_type {
+                        m[k] = w_all[k] / same;
+                    }
+                }
+                m
+            } else {
+                w_all
+            };
+            let lerp = |f: &[f32]| {
+                (w[0] * f[v[0]] as f64 + w[1] * f[v[1]] as f64 + w[2] * f[v[2]] as f64) as f32
+            };
+            let dir = |f: &[[f32; 3]]| -> [f32; 3] {
+                let mut acc = DVec3::ZERO;
+                for k in 0..3 {
+                    let a = f[v[k]];
+                    acc += DVec3::new(a[0] as f64, a[1] as f64, a[2] as f64) * w[k];
+                }
+                if acc == DVec3::ZERO {
+                    return [0.0; 3];
+                }
+                let world = plate_state.world_from_plate * acc;
+                let t = world - q * q.dot(world);
+                [t.x as f32, t.y as f32, t.z as f32]
+            };
+            let d = v[crate::geometry::locator::dominant_corner(&w)];
+            *z = lerp(&old.elevation_km);
+            *e = lerp(&old.thickness_km);
+            *ct = out_type;
+            *age = lerp(&old.age_my);
+            *rd = dir(&old.ridge_dir);
+            *og = old.orogeny[d];
+            *oga = lerp(&old.orogeny_age_my);
+            *fd = dir(&old.fold_dir);
+            *pl = src.plate;
+        });
+}
+
+/// Continental crust is never destroyed: where a plate's continental crust went under another
+/// plate's continental crust (counted in [`SampleSource::continental_lost`]), the crust on top
+/// takes the place, and as many oceanic samples of the same plate as were overridden, the ones
+/// closest to the overlap (breadth-first through the plate), become continental with the
+/// elevation and orogeny of the crust next to them: the thickened crust of the orogen spreads
+/// outward instead of vanishing. Deterministic (plates by id, samples in index order).
+pub fn displace_overridden_continents(
+    mesh: &SphereMesh,
+    params: &Params,
+    sources: &[SampleSource],
+    next: &mut Crust,
+) {
+    let thickness = params.init.continental_thickness_km as f32;
+    let mut by_plate: std::collections::BTreeMap<u32, Vec<u32>> = std::collections::BTreeMap::new();
+    for (j, src) in sources.iter().enumerate() {
+        if src.continental_lost && next.plate[j] != NO_PLATE {
+            by_plate.entry(next.plate[j]).or_default().push(j as u32);
+        }
+    }
+    if by_plate.is_empty() {
+        return;
+    }
+    let mut visited = vec![false; mesh.len()];
+    let (mut lost, mut moved, mut spilled) = (0usize, 0usize, 0usize);
+    for (plate, starts) in by_plate {
+        lost += starts.len();
+        // First within the plate; what a plate without enough ocean of its own (a continental
+        // fragment fresh from a rift, or a plate that is all continent) cannot take, it takes
+        // from the neighbouring plates' ocean next to it, which joins the plate: the continent
+        // grows outward over the adjacent ocean floor.
+        let debt = spread_continent(
+            mesh,
+            next,
+            &starts,
+            starts.len(),
+            Spread::Within(plate),
+            &mut visited,
+            thickness,
+        );
+        moved += starts.len() - debt;
+        if debt > 0 {
+            visited.iter_mut().for_each(|v| *v = false);
+            let left = spread_continent(
+                mesh,
+                next,
+                &starts,
+                debt,
+                Spread::Claim(plate),
+                &mut visited,
+                thickness,
+            );
+            spilled += debt - left;
+            moved += debt - left;
+            if left > 0 {
+                // Landlocked (its continent borders no ocean at all): as a last resort the
+                // nearest ocean bordering any continent turns continental, keeping its plate.
+                visited.iter_mut().for_each(|v| *v = false);
+                let rest = spread_continent(
+                    mesh,
+                    next,
+                    &starts,
+                    left,
+                    Spread::Anywhere,
+                    &mut visited,
+                    thickness,
+                );
+                spilled += left - rest;
+                moved += left - rest;
+            }
+        }
+        visited.iter_mut().for_each(|v| *v = false);
+    }
+    tracing::debug!(
+        lost,
+        moved,
+        spilled,
+        "overridden continental samples displaced"
+    );
+}
+
+/// Where [`spread_continent`] may turn ocean into continent.
+#[derive(Clone, Copy)]
+enum Spread {
+    /// Only through and into this plate's samples.
+    Within(u32),
+    /// Through any plate, next to this plate's continent; the samples it turns join this plate.
+    Claim(u32),
+    /// Through any plate, next to any continent; the samples keep their plate.
+    Anywhere,
+}
+
+/// Breadth-first from `starts`, turns up to `debt` oceanic samples next to continental ones into
+/// continental crust with the elevation and orogeny of that neighbour. Returns the debt left.
+fn spread_continent(
+    mesh: &SphereMesh,
+    next: &mut Crust,
+    starts: &[u32],
+    mut debt: usize,
+    spread: Spread,
+    visited: &mut [bool],
+    thickness: f32,
+) -> usize {
+    let plate = match spread {
+        Spread::Within(p) => Some(p),
+        Spread::Claim(_) | Spread::Anywhere => None,
+    };
+    let mut queue: std::collections::VecDeque<u32> = starts.iter().copied().collect();
+    for &s in starts {
+        visited[s as usize] = true;
+    }
+    while let Some(u) = queue.pop_front() {
+        if debt == 0 {
+            break;
+        }
+        let u = u as usize;
+        for &v in mesh.neighbors_of(u) {
+            let v = v as usize;
+            if visited[v] || plate.is_some_and(|p| next.plate[v] != p) || next.plate[v] == NO_PLATE
+            {
+                continue;
+            }
+            visited[v] = true;
+            // When claiming, only ocean right next to the claiming plate's own continent.
+            let owner_ok = match spread {
+                Spread::Within(_) | Spread::Anywhere => true,
+                Spread::Claim(p) => next.plate[u] == p,
+            };
+            if next.crust_type[v] == CrustType::Oceanic
+                && debt > 0
+                && next.crust_type[u] == CrustType::Continental
+                && owner_ok
+            {
+                next.crust_type[v] = CrustType::Continental;
+                next.elevation_km[v] = next.elevation_km[u].max(0.0);
+                next.thickness_km[v] = thickness;
+                next.orogeny[v] = next.orogeny[u];
+                next.orogeny_age_my[v] = next.orogeny_age_my[u];
+                next.fold_dir[v] = next.fold_dir[u];
+                if let Spread::Claim(p) = spread {
+                    next.plate[v] = p;
+                }
+                debt -= 1;
+            }
+            queue.push_back(v as u32);
+        }
+    }
+    debt
+}

@@ -788,7 +788,7 @@ fn write_extra_exports_on(
     e: &ExtraExports,
     quiet: bool,
 ) -> Result<Vec<PathBuf>> {
-    use tectonic_planets::amplify::{Amplifier, AmplifyOptions, ExemplarSet};
+    use tectonic_planets::amplify::{Amplifier, AmplifyOptions};
     use tectonic_planets::io::export::{self, ElevationOutputs, GeoGrid};
     use tectonic_planets::io::gltf;
     let wants_amp = e.amplified || e.preview || e.gltf;
@@ -843,7 +843,7 @@ fn write_extra_exports_on(
     };
     let mut amp = Amplifier::new(mesh, &view, seed, options);
     if let Some(dir) = &e.exemplars {
-        let set = ExemplarSet::load_dir(dir)?;
+        let set = tectonic_planets::io::exemplars::load_exemplar_dir(dir)?;
         amp = amp.with_exemplars(set, seed, options);
     }
     say("amplification tables", t);

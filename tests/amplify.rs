@@ -387,7 +387,7 @@ fn exemplars_follow_the_fold_direction_and_replace_procedural_relief() {
 #[test]
 fn shipped_exemplars_load() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/exemplars");
-    let set = ExemplarSet::load_dir(&dir).unwrap();
+    let set = tectonic_planets::io::exemplars::load_exemplar_dir(&dir).unwrap();
     for ty in TerrainType::ALL {
         assert!(
             !set.by_type[ty as usize].is_empty(),

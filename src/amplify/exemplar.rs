@@ -10,7 +10,7 @@
 //! as metres and pixels as 90 m (SRTM 3″). GeoTIFFs give their pixel size in degrees
 //! (converted at 111.32 km per degree) and their values in metres.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use super::procedural::{AmplifyUniform, AmplifyVertex, KIND_ANDEAN, KIND_HIMALAYAN, KIND_PLAIN};
 use crate::random::{hash3, unit_f64};
@@ -158,36 +158,6 @@ impl Exemplar {
         })
     }
 
-    /// Reads and preprocesses one file (16-bit PNG with optional JSON sidecar, or GeoTIFF).
-    pub fn load(path: &Path) -> Result<Self, ExemplarError> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .unwrap_or("")
-            .to_ascii_lowercase();
-        match ext.as_str() {
-            "png" => load_png(path),
-            "tif" | "tiff" => {
-                let bytes = std::fs::read(path).map_err(|source| ExemplarError::Io {
-                    path: path.to_path_buf(),
-                    source,
-                })?;
-                let t = crate::io::geotiff::read_single_band(&bytes).map_err(|reason| {
-                    ExemplarError::Format {
-                        path: path.to_path_buf(),
-                        reason,
-                    }
-                })?;
-                let pixel_km = t.pixel_deg.map_or(0.09, |d| (d * 111.32) as f32);
-                Self::from_elevations(path.to_path_buf(), t.width, t.height, &t.values, pixel_km)
-            }
-            _ => Err(ExemplarError::Format {
-                path: path.to_path_buf(),
-                reason: "expected a .png or .tif file".into(),
-            }),
-        }
-    }
-
     /// Bilinear relief (metres) at continuous pixel coordinates, mirrored at the borders so the
     /// exemplar repeats without a seam.
     pub fn relief_at(&self, col: f32, row: f32) -> f32 {
@@ -208,48 +178,6 @@ impl Exemplar {
     }
 }
 
-#[derive(serde::Deserialize)]
-struct PngSidecar {
-    min_elevation_m: Option<f64>,
-    max_elevation_m: Option<f64>,
-    pixel_size_m: Option<f64>,
-}
-
-fn load_png(path: &Path) -> Result<Exemplar, ExemplarError> {
-    let img = image::open(path).map_err(|e| ExemplarError::Format {
-        path: path.to_path_buf(),
-        reason: e.to_string(),
-    })?;
-    let grey = img.to_luma16();
-    let (w, h) = (grey.width() as usize, grey.height() as usize);
-    let sidecar_path = path.with_extension("json");
-    let sidecar: Option<PngSidecar> = match std::fs::read_to_string(&sidecar_path) {
-        Ok(s) => Some(serde_json::from_str(&s).map_err(|e| ExemplarError::Format {
-            path: sidecar_path.clone(),
-            reason: e.to_string(),
-        })?),
-        Err(_) => None,
-    };
-    let (lo, hi) = match &sidecar {
-        Some(PngSidecar {
-            min_elevation_m: Some(lo),
-            max_elevation_m: Some(hi),
-            ..
-        }) => (*lo, *hi),
-        _ => (0.0, 65535.0),
-    };
-    let pixel_km = sidecar
-        .as_ref()
-        .and_then(|s| s.pixel_size_m)
-        .map_or(0.09, |m| (m / 1000.0) as f32);
-    let elev: Vec<f32> = grey
-        .as_raw()
-        .iter()
-        .map(|&g| (lo + (hi - lo) * g as f64 / 65535.0) as f32)
-        .collect();
-    Exemplar::from_elevations(path.to_path_buf(), w, h, &elev, pixel_km)
-}
-
 /// Exemplars by terrain type.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ExemplarSet {
@@ -260,46 +188,6 @@ pub struct ExemplarSet {
 }
 
 impl ExemplarSet {
-    /// Loads every exemplar under `dir` (files sorted by name, so the set is reproducible).
-    pub fn load_dir(dir: &Path) -> Result<Self, ExemplarError> {
-        if !dir.is_dir() {
-            return Err(ExemplarError::Io {
-                path: dir.to_path_buf(),
-                source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a folder"),
-            });
-        }
-        let mut set = ExemplarSet::default();
-        for ty in TerrainType::ALL {
-            let sub = dir.join(ty.folder());
-            if !sub.is_dir() {
-                continue;
-            }
-            let mut files: Vec<PathBuf> = std::fs::read_dir(&sub)
-                .map_err(|source| ExemplarError::Io {
-                    path: sub.clone(),
-                    source,
-                })?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| {
-                    matches!(
-                        p.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()),
-                        Some(ref e) if e == "png" || e == "tif" || e == "tiff"
-                    )
-                })
-                .collect();
-            files.sort();
-            for f in files {
-                set.push(ty, Exemplar::load(&f)?);
-            }
-        }
-        if set.exemplars.is_empty() {
-            return Err(ExemplarError::Empty {
-                path: dir.to_path_buf(),
-            });
-        }
-        Ok(set)
-    }
-
     /// Adds an exemplar of type `ty`.
     pub fn push(&mut self, ty: TerrainType, e: Exemplar) {
         self.by_type[ty as usize].push(self.exemplars.len());
@@ -441,7 +329,5 @@ mod tests {
     fn bad_exemplars_are_refused() {
         let err = Exemplar::from_elevations("x".into(), 2, 2, &[0.0; 4], 0.09).unwrap_err();
         assert!(err.to_string().contains("4×4"), "{err}");
-        let err = ExemplarSet::load_dir(Path::new("/nonexistent/exemplars")).unwrap_err();
-        assert!(err.to_string().contains("/nonexistent/exemplars"), "{err}");
     }
 }

@@ -1,6 +1,7 @@
 //! Input and output: parameters (TOML), map rendering (PNG), run summaries (JSON), saves, and
 //! exports (16-bit heightmaps, GeoTIFF, glTF).
 
+pub mod exemplars;
 pub mod export;
 pub mod geotiff;
 pub mod gltf;

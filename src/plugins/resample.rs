@@ -9,7 +9,7 @@ use bevy_ecs::prelude::*;
 
 use super::schedule::{
     Phenomenon, PhenomenonAppExt, ResampleSystems, TectonicStep, TectonicSystems,
-    phenomenon_enabled,
+    phenomenon_enabled, run_after_resample,
 };
 use crate::systems::resample;
 
@@ -34,7 +34,9 @@ impl Plugin for ResamplePlugin {
                     .in_set(ResampleSystems::Interpolate)
                     .run_if(phenomenon_enabled(RESAMPLE))
                     .run_if(resample::resample_due),
-                resample::resample_rebuild.in_set(ResampleSystems::Rebuild),
+                (resample::resample_rebuild, run_after_resample)
+                    .chain()
+                    .in_set(ResampleSystems::Rebuild),
             ),
         );
     }

@@ -259,6 +259,25 @@ impl Plugin for TectonicSchedulePlugin {
     }
 }
 
+/// Runs the [`AfterResample`] schedule when a resampling installed its crust this step (fronts,
+/// terranes and collision uplift rebuilt on the new crust; timed apart as `after_resample`),
+/// then hands the allocator's free pages back. The last system of
+/// [`ResampleSystems::Rebuild`].
+pub fn run_after_resample(world: &mut World) {
+    let rebuilt = world
+        .get_resource_mut::<resample::ResampleWork>()
+        .is_some_and(|mut w| std::mem::take(&mut w.rebuilt));
+    if !rebuilt {
+        return;
+    }
+    let t_after = Instant::now();
+    let _ = world.try_run_schedule(AfterResample);
+    world
+        .resource_mut::<StepTimings>()
+        .record("after_resample", t_after.elapsed());
+    resample::release_free_memory();
+}
+
 /// A schedule of the step: one thread, and any ambiguity (two unordered systems touching the
 /// same data) refused when it is built.
 fn step_schedule(label: impl ScheduleLabel) -> Schedule {

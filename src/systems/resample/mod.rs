@@ -56,6 +56,9 @@ pub struct ResampleWork {
     pub continental_subducted_km2: f64,
     /// The same, summed over the whole run, km².
     pub continental_subducted_total_km2: f64,
+    /// Set when a resampling installed its crust this step; whoever runs the
+    /// [`AfterResample`](crate::plugins::AfterResample) schedule next clears it.
+    pub rebuilt: bool,
     started: Option<Instant>,
 }
 
@@ -260,13 +263,9 @@ pub fn resample_rebuild(world: &mut World) {
             .resource_mut::<StepTimings>()
             .record("resampling", t0.elapsed());
     }
-    // Fronts, terranes and collision uplift, rebuilt on the new crust (timed apart).
-    let t_after = Instant::now();
-    let _ = world.try_run_schedule(crate::plugins::AfterResample);
-    world
-        .resource_mut::<StepTimings>()
-        .record("after_resample", t_after.elapsed());
-    release_free_memory();
+    // Fronts, terranes and collision uplift are rebuilt on the new crust next, by the
+    // schedule's `run_after_resample`.
+    world.resource_mut::<ResampleWork>().rebuilt = true;
 }
 
 /// Hands the allocator's free pages back to the system. A resampling frees and reallocates many

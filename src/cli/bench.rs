@@ -1,0 +1,345 @@
+//! `planet bench`: time per system set, resamplings, rifting, saves and memory, with the GPU
+//! traffic per kind of step.
+
+use std::time::{Duration, Instant};
+
+use anyhow::{Result, bail};
+use clap::Args;
+use tectonic_planets::Simulation;
+use tectonic_planets::commands::Command as Cmd;
+use tectonic_planets::gpu::GpuContext;
+use tectonic_planets::io::save::{self};
+use tectonic_planets::plugins::TectonicSystems;
+
+use super::*;
+
+#[derive(Args)]
+pub(crate) struct BenchArgs {
+    #[command(flatten)]
+    pub(crate) planet: PlanetArgs,
+    /// Steps to time.
+    #[arg(long, default_value_t = 60)]
+    pub(crate) steps: u64,
+    /// Extra forced resamplings to time after the steps.
+    #[arg(long, default_value_t = 5)]
+    pub(crate) resamplings: u64,
+}
+
+/// Peak resident memory of this process (VmHWM), bytes, where the OS tells.
+pub(crate) fn peak_rss_bytes() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+pub(crate) fn median(v: &[f64]) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// Rifts the largest plate into two, `n` times (a step after each, which resamples), and returns
+/// the wall time of each rift itself (partition, motions, plate geometry), ms.
+pub(crate) fn bench_rifts(sim: &mut Simulation, n: usize) -> Result<Vec<f64>> {
+    use tectonic_planets::components::{Plate, PlateStats};
+    use tectonic_planets::systems::rifting::RiftLog;
+    let mut out = Vec::new();
+    for _ in 0..n {
+        let world = sim.world_mut();
+        let largest = world
+            .query::<(&Plate, &PlateStats)>()
+            .iter(world)
+            .max_by(|a, b| {
+                a.1.area_km2
+                    .total_cmp(&b.1.area_km2)
+                    .then(b.0.id.0.cmp(&a.0.id.0))
+            })
+            .map(|(p, _)| p.id.0);
+        let Some(id) = largest else { break };
+        let rift = Cmd::RiftAt {
+            plate: tectonic_planets::commands::PlateRef::Id(id),
+            fragments: 2,
+        };
+        if sim.apply(&rift).is_ok()
+            && let Some(e) = sim.world().resource::<RiftLog>().events.last()
+        {
+            out.push(e.elapsed_ms);
+        }
+        sim.step()?;
+    }
+    Ok(out)
+}
+
+pub(crate) fn bench(a: BenchArgs) -> Result<()> {
+    let t0 = Instant::now();
+    let mut sim = build_sim(&a.planet)?;
+    let build = t0.elapsed();
+    let n = sim.mesh().len();
+    println!(
+        "planet bench: {} samples, {} plates, {} steps, {} threads, backend {}",
+        n,
+        sim.stats().plates,
+        a.steps,
+        rayon::current_num_threads(),
+        backend_name(&sim)
+    );
+    let ms = |d: Option<Duration>| d.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
+    println!("{:<28} {:>10.1} ms", "mesh", ms(sim.timings().last("mesh")));
+    println!(
+        "{:<28} {:>10.1} ms",
+        "initial planet",
+        ms(sim.timings().last("initial_planet"))
+    );
+    println!(
+        "{:<28} {:>10.1} ms",
+        "mesh + initial planet",
+        build.as_secs_f64() * 1e3
+    );
+    // Each step: wall time, what kind of step it was, and its GPU traffic.
+    let mut steps: Vec<BenchStep> = Vec::new();
+    let traffic0 = gpu_traffic(&sim);
+    for _ in 0..a.steps {
+        let before = (sim.clock().resamplings, gpu_traffic(&sim));
+        let s = Instant::now();
+        sim.step()?;
+        let ms = s.elapsed().as_secs_f64() * 1e3;
+        let after = gpu_traffic(&sim);
+        steps.push(BenchStep {
+            ms,
+            kind: if sim.clock().resamplings != before.0 {
+                StepKind::Resampling
+            } else if steps.last().is_some_and(|s| s.kind == StepKind::Resampling) {
+                StepKind::AfterResampling
+            } else {
+                StepKind::Steady
+            },
+            traffic: before.1.zip(after).map(|(b, a)| {
+                (
+                    a.uploaded_bytes - b.uploaded_bytes,
+                    a.downloaded_bytes - b.downloaded_bytes,
+                )
+            }),
+        });
+    }
+    let traffic1 = gpu_traffic(&sim);
+    let step_ms: Vec<f64> = steps.iter().map(|s| s.ms).collect();
+    for _ in 0..a.resamplings {
+        sim.request_resample();
+        sim.step()?;
+    }
+    let rift_ms = bench_rifts(&mut sim, 3)?;
+    println!("median per step, by system set:");
+    let mut per_step_sum = 0.0;
+    for set in TectonicSystems::ALL {
+        let m = sim.timings().median_ms(set.name()).unwrap_or(f64::NAN);
+        if set != TectonicSystems::Resample {
+            per_step_sum += m;
+        }
+        println!("  {:<26} {:>10.3} ms", set.name(), m);
+    }
+    println!("{:<28} {:>10.3} ms", "all sets but resample", per_step_sum);
+    println!(
+        "{:<28} {:>10.3} ms",
+        "whole step (median)",
+        median(&step_ms)
+    );
+    for kind in StepKind::ALL {
+        let ms: Vec<f64> = steps
+            .iter()
+            .filter(|s| s.kind == kind)
+            .map(|s| s.ms)
+            .collect();
+        println!(
+            "{:<30} {:>8.3} ms  ({} of {} steps)",
+            format!("  {} (median)", kind.label()),
+            median(&ms),
+            ms.len(),
+            steps.len()
+        );
+    }
+    println!(
+        "{:<28} {:>10.1} ms",
+        "one resampling (median)",
+        sim.timings().median_ms("resampling").unwrap_or(f64::NAN)
+    );
+    println!(
+        "{:<28} {:>10.1} ms",
+        "  + fronts, terranes (median)",
+        sim.timings()
+            .median_ms("after_resample")
+            .unwrap_or(f64::NAN)
+    );
+    println!(
+        "{:<28} {:>10.1} ms",
+        "  of which locate (median)",
+        sim.timings()
+            .median_ms("resample_locate")
+            .unwrap_or(f64::NAN)
+    );
+    println!(
+        "{:<28} {:>10.1} ms",
+        "  of which interp (median)",
+        sim.timings()
+            .median_ms("resample_interpolate")
+            .unwrap_or(f64::NAN)
+    );
+    if let Some(t) = gpu_traffic(&sim) {
+        println!(
+            "{:<28} {:>10} on the GPU, {} samples left to the CPU",
+            "point locations", t.locations, t.rechecked_samples
+        );
+        println!(
+            "{:<28} {:>10} on the GPU",
+            "collision surges", t.collision_surges
+        );
+        println!(
+            "{:<28} {:>10} on the GPU",
+            "interpolations", t.interpolations
+        );
+    }
+    println!(
+        "{:<28} {:>10.1} ms  ({} rifts of the largest plate into 2)",
+        "one rift (median)",
+        median(&rift_ms),
+        rift_ms.len()
+    );
+    if let (Some(t0), Some(t1)) = (traffic0, traffic1) {
+        let steps = a.steps.max(1) as f64;
+        println!(
+            "{:<28} {:>10.2} MB up, {:.2} MB down, {:.1} dispatches, {} full crust uploads in {} steps",
+            "GPU traffic, mean per step",
+            (t1.uploaded_bytes - t0.uploaded_bytes) as f64 / steps / 1e6,
+            (t1.downloaded_bytes - t0.downloaded_bytes) as f64 / steps / 1e6,
+            (t1.dispatches - t0.dispatches) as f64 / steps,
+            t1.crust_uploads - t0.crust_uploads,
+            a.steps
+        );
+    }
+    print_step_traffic(&steps, n);
+    let state = sim.state_bytes();
+    println!(
+        "{:<28} {:>10.1} MB  ({:.0} bytes/sample)",
+        "simulation state",
+        state as f64 / 1e6,
+        state as f64 / n as f64
+    );
+    if let Some(peak) = peak_rss_bytes() {
+        println!(
+            "{:<28} {:>10.1} MB  ({:.0} bytes/sample)",
+            "peak memory (VmHWM)",
+            peak as f64 / 1e6,
+            peak as f64 / n as f64
+        );
+    }
+    bench_saves(&mut sim)
+}
+
+/// One timed step of the bench.
+pub(crate) struct BenchStep {
+    /// Wall time, ms.
+    pub(crate) ms: f64,
+    /// Steady, resampling, or the step right after a resampling.
+    pub(crate) kind: StepKind,
+    /// Bytes uploaded and downloaded during the step (GPU backend only).
+    pub(crate) traffic: Option<(u64, u64)>,
+}
+
+/// The kinds of step the bench reports apart.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum StepKind {
+    /// Neither a resampling nor the step right after one.
+    Steady,
+    /// A step that ended in a global resampling.
+    Resampling,
+    /// The step right after a resampling: on the GPU backend it uploads the crust that the CPU
+    /// rebuilt, so its traffic belongs to the resampling.
+    AfterResampling,
+}
+
+impl StepKind {
+    const ALL: [StepKind; 3] = [
+        StepKind::Steady,
+        StepKind::Resampling,
+        StepKind::AfterResampling,
+    ];
+    fn label(self) -> &'static str {
+        match self {
+            StepKind::Steady => "steady step",
+            StepKind::Resampling => "resampling step",
+            StepKind::AfterResampling => "after resampling",
+        }
+    }
+}
+
+/// The GPU traffic of each kind of step: median and largest bytes up and down per step, and per
+/// sample. Steady steps are what residency is judged by.
+pub(crate) fn print_step_traffic(steps: &[BenchStep], samples: usize) {
+    for kind in StepKind::ALL {
+        let t: Vec<(u64, u64)> = steps
+            .iter()
+            .filter(|s| s.kind == kind)
+            .filter_map(|s| s.traffic)
+            .collect();
+        if t.is_empty() {
+            continue;
+        }
+        let up: Vec<f64> = t.iter().map(|x| x.0 as f64).collect();
+        let down: Vec<f64> = t.iter().map(|x| x.1 as f64).collect();
+        let max = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
+        let per = |b: f64| b / samples.max(1) as f64;
+        println!(
+            "{:<30} {:>8.3} MB up ({:.2} B/sample), {:.3} MB down ({:.2} B/sample); largest {:.2} MB up, {:.2} MB down ({} steps)",
+            format!("GPU traffic, {}", kind.label()),
+            median(&up) / 1e6,
+            per(median(&up)),
+            median(&down) / 1e6,
+            per(median(&down)),
+            max(&up) / 1e6,
+            max(&down) / 1e6,
+            t.len()
+        );
+    }
+}
+
+/// The backend's name for the bench header: `cpu`, or `gpu (adapter, type)`.
+pub(crate) fn backend_name(sim: &Simulation) -> String {
+    match sim.world().get_resource::<GpuContext>() {
+        Some(g) => format!("gpu ({}, {:?})", g.adapter.name, g.adapter.device_type),
+        None => "cpu".into(),
+    }
+}
+
+/// The GPU traffic counters, on the GPU backend.
+pub(crate) fn gpu_traffic(sim: &Simulation) -> Option<tectonic_planets::gpu::GpuTraffic> {
+    sim.world().get_resource::<GpuContext>().map(|g| g.traffic)
+}
+
+/// Times a save (encode, compress, write, sync) and a load (read, check, decompress, rebuild the
+/// mesh, restore) of the benchmark planet, and gives the file size.
+pub(crate) fn bench_saves(sim: &mut Simulation) -> Result<()> {
+    let path = std::env::temp_dir().join(format!(
+        "planet-bench-{}.{}",
+        std::process::id(),
+        save::EXTENSION
+    ));
+    let t = Instant::now();
+    let info = save::save_to_file(sim, &path)?;
+    let save_ms = t.elapsed().as_secs_f64() * 1e3;
+    let t = Instant::now();
+    let mut loaded = save::load_from_file(&path)?;
+    let load_ms = t.elapsed().as_secs_f64() * 1e3;
+    let _ = std::fs::remove_file(&path);
+    if loaded.state_hash() != sim.state_hash() {
+        bail!("the loaded planet differs from the saved one");
+    }
+    println!("{:<28} {:>10.1} ms", "save to file", save_ms);
+    println!("{:<28} {:>10.1} ms", "load from file", load_ms);
+    println!(
+        "{:<28} {:>10.1} MB  ({:.1} MB before compression)",
+        "save file size",
+        info.file_bytes as f64 / 1e6,
+        info.raw_bytes as f64 / 1e6
+    );
+    Ok(())
+}

@@ -6,6 +6,8 @@
 //! resources, plates are entities, and each phenomenon is a plugin whose systems sit in one set
 //! of the [`TectonicStep`](plugins::TectonicStep) schedule. Start with [`Simulation`].
 
+#![deny(missing_docs)]
+
 pub mod amplify;
 pub mod commands;
 pub mod components;

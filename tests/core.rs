@@ -512,3 +512,58 @@ fn removal_messages_do_not_pile_up() {
         "{held} of {written} removal messages are still held after 40 steps"
     );
 }
+
+/// A counter two test plugins write.
+#[derive(Resource, Default)]
+struct Tally(u64);
+
+fn tally_add(mut t: ResMut<Tally>) {
+    t.0 += 1;
+}
+
+fn tally_double(mut t: ResMut<Tally>) {
+    t.0 *= 2;
+}
+
+/// Two systems writing the same resource in one set, unordered.
+struct RacyPlugin;
+
+impl Plugin for RacyPlugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<Tally>();
+        app.add_systems(
+            TectonicStep,
+            (tally_add, tally_double).in_set(AgingSystems::After),
+        );
+    }
+}
+
+/// The same two systems, ordered.
+struct OrderedPlugin;
+
+impl Plugin for OrderedPlugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<Tally>();
+        app.add_systems(
+            TectonicStep,
+            (tally_add, tally_double)
+                .chain()
+                .in_set(AgingSystems::After),
+        );
+    }
+}
+
+#[test]
+fn a_plugin_whose_systems_are_not_ordered_is_refused() {
+    let err = Simulation::with_plugins(params(2_000, 4), TectonicPlugins.build().add(RacyPlugin))
+        .err()
+        .expect("two unordered writers of one resource must be refused");
+    assert!(matches!(err, SimError::Schedule(_)), "{err}");
+    assert!(err.to_string().contains("TectonicStep"), "{err}");
+    let mut sim =
+        Simulation::with_plugins(params(2_000, 4), TectonicPlugins.build().add(OrderedPlugin))
+            .expect("ordered systems are accepted");
+    sim.run_steps(2).unwrap();
+    // (0 + 1) * 2 = 2, then (2 + 1) * 2 = 6: added, then doubled.
+    assert_eq!(sim.world().resource::<Tally>().0, 6);
+}

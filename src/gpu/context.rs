@@ -140,6 +140,15 @@ impl GpuContext {
         out
     }
 
+    /// Keeps `e` as the failure the simulation stops with at the end of the step (the first one
+    /// of a step wins). Not logged here: whoever stops reports it, once.
+    pub fn record_failure(&mut self, e: GpuError) {
+        tracing::debug!("GPU failure recorded: {e}");
+        if self.failure.is_none() {
+            self.failure = Some(e);
+        }
+    }
+
     /// Tells every kernel made so far that the resident crust buffers were replaced.
     pub(super) fn forget_bind_groups(&mut self) {
         for k in self.kernels.values_mut() {
@@ -290,9 +299,8 @@ pub fn run_or_record(
     match f(ctx) {
         Ok(()) => true,
         Err(e) => {
-            tracing::error!("{e}");
             ctx.invalidate_crust();
-            ctx.failure = Some(e);
+            ctx.record_failure(e);
             false
         }
     }

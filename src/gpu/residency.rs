@@ -432,11 +432,8 @@ pub fn write_crust_fields_or_record(
     match write_crust_fields(world, fields, write) {
         Ok(()) => true,
         Err(e) => {
-            tracing::error!("{e}");
-            if let Some(mut g) = world.get_resource_mut::<GpuContext>()
-                && g.failure.is_none()
-            {
-                g.failure = Some(e);
+            if let Some(mut g) = world.get_resource_mut::<GpuContext>() {
+                g.record_failure(e);
             }
             false
         }
@@ -449,11 +446,8 @@ pub fn sync_crust_to_host_or_record(world: &mut World, mask: FieldMask) -> bool 
     match sync_crust_to_host(world, mask) {
         Ok(()) => true,
         Err(e) => {
-            tracing::error!("{e}");
-            if let Some(mut g) = world.get_resource_mut::<GpuContext>()
-                && g.failure.is_none()
-            {
-                g.failure = Some(e);
+            if let Some(mut g) = world.get_resource_mut::<GpuContext>() {
+                g.record_failure(e);
             }
             false
         }
@@ -476,8 +470,7 @@ pub fn pull_or_record(
     match gpu.pull(crust.bypass_change_detection(), mask) {
         Ok(()) => true,
         Err(e) => {
-            tracing::error!("{e}");
-            gpu.failure = Some(e);
+            gpu.record_failure(e);
             false
         }
     }

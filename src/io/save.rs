@@ -146,6 +146,7 @@ pub fn pack_sections(sections: &[RawSection], opts: SaveOptions) -> (Vec<u8>, Sa
     (out, info)
 }
 
+/// CRC-32 (IEEE, as zlib's `crc32`) of a whole save but its checksum field (bytes 24..28).
 pub fn checksum(file: &[u8]) -> u32 {
     let mut h = crc32fast::Hasher::new();
     h.update(&file[..24.min(file.len())]);

@@ -18,6 +18,9 @@ use crate::resources::{
     SaveAppExt, SaveSection, SectionError, SectionReader, SectionWriter, SimClock,
 };
 
+/// Registers the core sections: parameters, mesh recipe, phenomena switches, clock, crust,
+/// plates, command history and plugin parameters. Added by every
+/// [`Simulation`](crate::Simulation).
 pub struct CoreSavePlugin;
 
 impl Plugin for CoreSavePlugin {

@@ -250,8 +250,8 @@ impl Simulation {
         Ok(())
     }
 
-    /// [`Self::sync_crust`] for methods that cannot return an error: a failure is logged and
-    /// kept in the context, so the next step stops with it.
+    /// [`Self::sync_crust`] for methods that cannot return an error: a failure is kept in the
+    /// context, so the next step stops with it (and reports it).
     fn sync_crust_or_record(&mut self) {
         crate::gpu::sync_crust_to_host_or_record(self.app.world_mut(), crate::gpu::FieldMask::ALL);
     }

@@ -84,10 +84,7 @@ pub fn update_diagnostics(
         if !newer.is_empty() && gpu.failure.is_none() {
             match crate::gpu::crust_reduce::crust_reduce_gpu(&mut gpu) {
                 Ok(r) => reduced = Some((r, newer)),
-                Err(e) => {
-                    tracing::error!("{e}");
-                    gpu.failure = Some(e);
-                }
+                Err(e) => gpu.record_failure(e),
             }
         }
         if reduced.is_none() {
@@ -112,9 +109,7 @@ pub fn update_diagnostics(
     }
     s.plates = plates.iter().count();
     *stats = s;
-    if let Some(e) = &health.0 {
-        tracing::error!("{e}");
-    }
+    // A non-finite value stops the simulation at the end of the step, which reports it.
 }
 
 /// `Crust::check_finite` with the fields of `newer` taken from the device reduction `r` (same

@@ -1,5 +1,5 @@
 //! Host side of `shaders/aging.wgsl`: crust and orogeny ages grow by the time step, on the
-//! resident buffers. The CPU reference is [`aging_cpu`] (the function the CPU backend runs, in
+//! resident buffers. The CPU reference is [`aging_cpu`](crate::systems::aging::aging_cpu) (the function the CPU backend runs, in
 //! `src/systems/aging.rs`); both do the same f32 additions, so they agree bit for bit.
 
 use crate::gpu::{

@@ -1,5 +1,5 @@
 //! Host side of `shaders/amplify.wgsl`: procedural amplification (paper §5) of query points on
-//! the device, one invocation per point. The CPU reference is [`amplify_cpu`] (the function the
+//! the device, one invocation per point. The CPU reference is [`amplify_cpu`](crate::amplify::procedural::amplify_cpu) (the function the
 //! CPU exports run, in `src/amplify/procedural.rs`); the shader mirrors `amplify_point` in f32,
 //! and the two agree within the tolerance of `docs/amplification.md` (`tests/amplify.rs`).
 //!
@@ -252,7 +252,7 @@ impl AmplifyGpu {
 }
 
 /// The amplified elevation (metres) of every query on the device: the GPU counterpart of
-/// [`amplify_cpu`] (the `count` of `uniform` is ignored; each chunk sets its own).
+/// [`amplify_cpu`](crate::amplify::procedural::amplify_cpu) (the `count` of `uniform` is ignored; each chunk sets its own).
 pub fn amplify_gpu(
     ctx: &mut GpuContext,
     vertices: &[AmplifyVertex],

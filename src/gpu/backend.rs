@@ -77,7 +77,7 @@ pub enum GpuError {
     #[error("{0}")]
     TooLarge(String),
     /// A CPU system wrote the host crust while the device held newer fields (it did not pull
-    /// them first with [`sync_crust_to_host`] or [`GpuContext::pull`]); uploading the host copy
+    /// them first with [`sync_crust_to_host`](crate::gpu::sync_crust_to_host) or [`GpuContext::pull`]); uploading the host copy
     /// would silently lose the device's newer data.
     #[error(
         "the host crust was written while the device held newer fields ({0:?}); \

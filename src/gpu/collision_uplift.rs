@@ -1,7 +1,7 @@
 //! Host side of `shaders/collision_uplift.wgsl`: the collision surge around each sutured
 //! terrane (uplift of continental crust, Himalayan orogeny, fold directions away from the
-//! terrane) on the resident crust buffers. The CPU reference is [`collision_uplift_cpu`] (the
-//! function the CPU backend runs, in `src/systems/convergence.rs`).
+//! terrane) on the resident crust buffers. The CPU reference is [`collision_uplift_cpu`](crate::systems::convergence::collision::collision_uplift_cpu) (the
+//! function the CPU backend runs, in `src/systems/convergence/collision.rs`).
 //!
 //! The distance of each sample to the terrane (a graph search through the terrane's new plate,
 //! `propagate_nearest`) stays on the CPU; per surge, the distances go up (4 bytes a sample) with

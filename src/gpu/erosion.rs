@@ -1,5 +1,5 @@
 //! Host side of `shaders/erosion.wgsl`: continental erosion, oceanic damping and sediment
-//! accretion on the resident elevation buffer. The CPU reference is [`erosion_cpu`] (the very
+//! accretion on the resident elevation buffer. The CPU reference is [`erosion_cpu`](crate::systems::erosion::erosion_cpu) (the very
 //! function the CPU backend runs, in `src/systems/erosion.rs`).
 
 use crate::gpu::{
@@ -10,7 +10,7 @@ use crate::resources::Params;
 /// The kernel's WGSL.
 pub const WGSL: &str = include_str!("../../shaders/erosion.wgsl");
 
-/// The per-step constants of [`erode_sample`].
+/// The per-step constants of [`erode_sample`](crate::systems::erosion::erode_sample).
 #[derive(Clone, Copy, Debug)]
 pub struct ErosionRates {
     pub(crate) z_c: f64,

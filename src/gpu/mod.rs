@@ -7,7 +7,7 @@
 //! step — fronts, collisions, terranes, diagnostics, resampling — so it cannot live only there;
 //! docs/gpu.md and docs/gpu-residency.md have the details and the measured bytes):
 //! - The whole crust (46 bytes a sample, [`CrustBuffers`]) is kept in device buffers between
-//!   steps. It goes up in full only when the host [`Crust`] changed since the last sync (bevy
+//!   steps. It goes up in full only when the host [`Crust`](crate::resources::Crust) changed since the last sync (bevy
 //!   change ticks): after a resampling, a load, or a CPU system that wrote the crust undeclared.
 //!   A writer that declares the fields it changes ([`write_crust_fields`]) uploads only those.
 //! - Kernels do not read back what they write: they mark the fields newer on the device

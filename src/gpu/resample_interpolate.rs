@@ -1,6 +1,6 @@
 //! Host side of `shaders/resample_interpolate.wgsl`: the interpolation of a resampling (every
 //! field of the old crust at each sample's located source into the new crust). The CPU
-//! reference is [`resample_interpolate_cpu`] (`interpolate` in `src/systems/resample.rs`, the
+//! reference is [`resample_interpolate_cpu`](fn@crate::systems::resample::interpolate) (`interpolate` in `src/systems/resample/interpolate.rs`, the
 //! function the CPU backend runs).
 //!
 //! What crosses the bus: once per mesh, the reference positions and triangles (about 36 bytes a
@@ -101,7 +101,7 @@ fn frame_groups(table: &PlateTable) -> Vec<u32> {
 }
 
 /// Interpolates every field of `old` at `sources` into `next` on the device: same semantics as
-/// [`resample_interpolate_cpu`], in f32 (see docs/gpu.md for the tolerances). The kernel reads
+/// [`resample_interpolate_cpu`](fn@crate::systems::resample::interpolate), in f32 (see docs/gpu.md for the tolerances). The kernel reads
 /// the old crust from the resident buffers, which must hold `old` (call
 /// [`GpuContext::sync_crust`] first; the host copy of `old` may be stale in the fields the
 /// device holds newer, it is only used for its size).
@@ -117,7 +117,7 @@ pub fn resample_interpolate_gpu(
 }
 
 /// [`resample_interpolate_gpu`] reading the sources from the device: `sources` must be the ones
-/// the last [`crate::gpu::resample_locate::resample_locate_gpu`] returned, whose output (with
+/// the last [`resample_locate_gpu`](crate::systems::resample::resample_locate_gpu) returned, whose output (with
 /// the rechecked samples written back) is still on the device; only the checks read the host
 /// copy. Nothing of the sources goes up. An error if the device holds no complete location.
 pub fn resample_interpolate_gpu_located(

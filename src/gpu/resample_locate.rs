@@ -1,8 +1,8 @@
 //! Host side of `shaders/resample_locate.wgsl`: the point location of a global resampling (for
 //! every reference sample, the covering plate after the plates moved, the triangle in that
 //! plate's frame, the barycentric weights, the suture and the lost-continent flag; gaps are the
-//! samples no plate covers). The CPU reference is [`resample_locate_cpu`], the function the CPU
-//! backend runs (`src/systems/resample.rs`); the interpolation of the crust fields from the
+//! samples no plate covers). The CPU reference is [`resample_locate_cpu`](crate::systems::resample::resample_locate_cpu), the function the CPU
+//! backend runs (`src/systems/resample/locate.rs`); the interpolation of the crust fields from the
 //! located sources, the gap search and the rebuild stay on the CPU on both backends.
 //!
 //! What crosses the bus:
@@ -22,7 +22,7 @@
 //! Precision: the GPU works in f32, the CPU in f64. Where f32 rounding could change a decision
 //! (near a triangle edge or vertex, a tie of corners, a continental weight near 1/2, a locator
 //! cell boundary, a cap rim), the kernel flags the sample and the host locates it again with
-//! [`locate_one`], the CPU code. All other samples get the CPU's plate, slot, suture, flags and
+//! [`locate_one`](crate::systems::resample::locate_one), the CPU code. All other samples get the CPU's plate, slot, suture, flags and
 //! triangle exactly, and weights within about 1e-5 of the CPU's.
 
 use glam::DVec3;
@@ -46,7 +46,8 @@ pub struct CellPlates {
 
 impl CellPlates {
     const EMPTY: u16 = u16::MAX;
-    const MANY: u16 = u16::MAX - 1;
+    /// First entry of a cell touched by more plates than the entry holds.
+    pub const MANY: u16 = u16::MAX - 1;
 
     /// Builds the lists for the ownership of `old` (slots of `table`).
     pub fn build(mesh: &SphereMesh, old: &Crust, table: &PlateTable) -> Self {
@@ -256,7 +257,7 @@ impl LocateKernel {
 /// What a GPU location did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct LocateReport {
-    /// Samples whose decision the kernel left to the CPU (located again with [`locate_one`]).
+    /// Samples whose decision the kernel left to the CPU (located again with [`locate_one`](crate::systems::resample::locate_one)).
     pub rechecked: usize,
     /// Samples no plate covers (gaps).
     pub gaps: usize,
@@ -346,7 +347,7 @@ fn plate_words(table: &PlateTable) -> Vec<GpuPlate> {
 
 /// Runs the kernel and reads its output back: per sample, the source as the kernel found it
 /// (gaps as [`SampleSource`] gaps), and the samples the kernel left to the CPU (their sources
-/// are gaps here). [`resample_locate_gpu`] then locates those on the CPU. The kernel reads the
+/// are gaps here). [`resample_locate_gpu`](crate::systems::resample::resample_locate_gpu) then locates those on the CPU. The kernel reads the
 /// old crust's plates and crust types from the resident buffers: call
 /// [`GpuContext::sync_crust`] with `old` first (`old` itself only sizes the check here).
 pub fn resample_locate_raw(

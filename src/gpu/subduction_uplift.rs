@@ -1,7 +1,7 @@
 //! Host side of `shaders/subduction_uplift.wgsl`: subduction uplift, Andean orogeny, fold
 //! directions and trenches on the resident crust buffers. The CPU reference is
-//! [`subduction_uplift_cpu`] (the function the CPU backend runs, in
-//! `src/systems/convergence.rs`).
+//! [`subduction_uplift_cpu`](crate::systems::convergence::subduction::subduction_uplift_cpu) (the function the CPU backend runs, in
+//! `src/systems/convergence/subduction.rs`).
 //!
 //! The per-sample convergence field goes up once per resampling (when its change tick moves);
 //! per step only the front-point table ([`FrontGpu`], 32 bytes a point) and the uniforms do.

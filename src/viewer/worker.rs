@@ -37,7 +37,7 @@ const SNAPSHOT_INTERVAL: Duration = Duration::from_millis(120);
 /// when the window wants all of it, which keeps a big planet stepping).
 const PRIORITY_DROP: i32 = 5;
 
-/// Lowers the calling thread's scheduling priority (by [`PRIORITY_DROP`] `nice` levels; on
+/// Lowers the calling thread's scheduling priority (by `PRIORITY_DROP` `nice` levels; on
 /// Linux a thread's own). The viewer's simulation threads call it, so that drawing frames
 /// comes first.
 pub fn lower_thread_priority() {

@@ -1,6 +1,6 @@
 //! Model parameters of the tectonic planet generator: one [`Params`] struct with every constant
 //! in physical units, generated from a single declaration table together with its schema
-//! ([`schema`]), dotted-key access and validation. Reading TOML files and printing the commented
+//! (`schema`), dotted-key access and validation. Reading TOML files and printing the commented
 //! TOML are in [`file`].
 
 mod file;

@@ -1,5 +1,5 @@
 //! Stage 2 of a resampling: every field of the covering plate interpolated at each sample
-//! ([`interpolate`], the CPU reference of `shaders/resample_interpolate.wgsl`), and continental
+//! ([`interpolate`](fn@interpolate), the CPU reference of `shaders/resample_interpolate.wgsl`), and continental
 //! crust that went under another plate displaced rather than lost. See [`super`].
 #![allow(clippy::needless_range_loop)]
 

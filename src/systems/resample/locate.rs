@@ -1,6 +1,6 @@
 //! Stage 1 of a resampling: which plate covers each reference sample, and where in that plate's
 //! rotated triangulation ([`resample_locate_cpu`], one [`locate_one`] per sample; on the GPU
-//! [`locate_on_gpu`], with the doubtful samples rechecked here in f64). See [`super`].
+//! [`locate_on_gpu`](resample_locate_gpu), with the doubtful samples rechecked here in f64). See [`super`].
 #![allow(clippy::needless_range_loop)]
 
 use bevy_ecs::prelude::*;

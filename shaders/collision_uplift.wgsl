@@ -1,7 +1,8 @@
 // Collision surge around one sutured terrane, in place: continental samples the surge reaches
-// rise by Δz₀·(1 − (d/r)²)² (capped at z_c); where the rise exceeds 1 m they get Himalayan
+// rise by Δz₀·(1 − (d/r)²)² (capped at z_c; with isostatic relief, the crust thickens by that
+// rise over 1 − ρ_c/ρ_m instead, capped); where the rise exceeds 1 m they get Himalayan
 // orogeny, orogeny age 0 and a fold direction pointing away from the terrane's centroid.
-// CPU reference: collision_uplift_cpu (src/systems/convergence.rs). The distances (great-circle,
+// CPU reference: collision_uplift_cpu (src/systems/convergence/collision.rs). The distances (great-circle,
 // through the terrane's new plate) come from the host, which finds them by a graph search; one
 // thread per four samples, because the orogeny field is packed four samples to a word.
 
@@ -18,6 +19,11 @@ struct CollisionUniforms {
     max_elevation_km: f32,
     count: u32,
     row_stride: u32,
+    thickening: f32,
+    max_thickness_km: f32,
+    // 1: isostatic relief (thicken the crust only), 0: the paper's (raise the elevation).
+    isostatic: u32,
+    _pad0: u32,
 }
 
 @group(0) @binding(0) var<uniform> u: CollisionUniforms;
@@ -31,6 +37,7 @@ struct CollisionUniforms {
 // Distance to the terrane, radians, as f32 bits; infinite (or NaN) where the surge does not
 // reach.
 @group(0) @binding(7) var<storage, read> dist_bits: array<u32>;
+@group(0) @binding(8) var<storage, read_write> thickness_km: array<f32>;
 
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -55,7 +62,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         if (dz <= 0.0 || byte_of(ct_word, i) != CRUST_CONTINENTAL) {
             continue;
         }
-        elevation_km[i] = min(elevation_km[i] + dz, u.max_elevation_km);
+        if (u.isostatic != 0u) {
+            let t = thickness_km[i];
+            thickness_km[i] = min(t + dz * u.thickening, max(u.max_thickness_km, t));
+        } else {
+            elevation_km[i] = min(elevation_km[i] + dz, u.max_elevation_km);
+        }
         if (dz > 1e-3) {
             og_word = with_byte(og_word, i, OROGENY_HIMALAYAN);
             orogeny_age_my[i] = 0.0;

@@ -1,6 +1,6 @@
-// Subduction uplift on overriding plates (u0·f(d)·g(v)·h(z̃), capped at z_c, Andean orogeny,
-// fold directions) and trenches on subducting plates, one step, in place. CPU reference:
-// subduction_uplift_cpu (src/systems/convergence.rs). One thread per four samples, because the
+// Subduction uplift on overriding plates (u0·f(d)·g(v)·h(z̃), capped at z_c, the crust
+// thickened by the uplift over 1 − ρ_c/ρ_m, capped, Andean orogeny, fold directions) and trenches on subducting plates, one step, in place. CPU reference:
+// subduction_uplift_cpu (src/systems/convergence/subduction.rs). One thread per four samples, because the
 // orogeny field is packed four samples to a word and a word must have a single writer.
 // Per-front-point factors (g·h·u0, the fold increment) come from the host, computed in f64 as
 // the CPU does; the distance transfer f(d) is evaluated here in f32 on d/r_s.
@@ -19,6 +19,15 @@ struct UpliftUniforms {
     trench_rate: f32,
     count: u32,
     row_stride: u32,
+    thickening: f32,
+    max_thickness_km: f32,
+    oceanic_thickening: f32,
+    max_oceanic_thickness_km: f32,
+    // 1: isostatic relief (thicken the crust only), 0: the paper's (raise the elevation, trench).
+    isostatic: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 // Keep in sync with FrontGpu in src/gpu/subduction_uplift.rs.
@@ -43,6 +52,7 @@ struct FrontGpu {
 // f32 bits, subducting point).
 @group(0) @binding(6) var<storage, read> field: array<vec4<u32>>;
 @group(0) @binding(7) var<storage, read> fronts: array<FrontGpu>;
+@group(0) @binding(8) var<storage, read_write> thickness_km: array<f32>;
 
 // Driftworld's cubic distance transfer on x = d / r_s (1 at the control distance, 0 at r_s,
 // clipped at 0), the CPU's distance_transfer divided through by r_s³.
@@ -77,19 +87,34 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let fr = fronts[op];
             let up = fr.uplift_scale_km_per_my * transfer(od);
             if (up > 0.0) {
-                let znew = min(z + up * u.dt_my, u.max_elevation_km);
-                z = znew;
-                if (znew > 0.0 && up * u.dt_my > 1e-4) {
-                    og_word = with_byte(og_word, i, OROGENY_ANDEAN);
-                    orogeny_age_my[i] = 0.0;
+                if (u.isostatic != 0u) {
+                    let t = thickness_km[i];
+                    if (byte_of(ct_word, i) == CRUST_OCEANIC) {
+                        thickness_km[i] = min(t + up * u.dt_my * u.oceanic_thickening,
+                            max(u.max_oceanic_thickness_km, t));
+                    } else {
+                        thickness_km[i] = min(t + up * u.dt_my * u.thickening,
+                            max(u.max_thickness_km, t));
+                    }
+                    if (z > 0.0 && up * u.dt_my > 1e-4) {
+                        og_word = with_byte(og_word, i, OROGENY_ANDEAN);
+                        orogeny_age_my[i] = 0.0;
+                    }
+                } else {
+                    let znew = min(z + up * u.dt_my, u.max_elevation_km);
+                    z = znew;
+                    if (znew > 0.0 && up * u.dt_my > 1e-4) {
+                        og_word = with_byte(og_word, i, OROGENY_ANDEAN);
+                        orogeny_age_my[i] = 0.0;
+                    }
                 }
                 fold_dir[3u * i] = fold_dir[3u * i] + fr.fold_inc_x;
                 fold_dir[3u * i + 1u] = fold_dir[3u * i + 1u] + fr.fold_inc_y;
                 fold_dir[3u * i + 2u] = fold_dir[3u * i + 2u] + fr.fold_inc_z;
             }
         }
-        if (sp != NO_POINT && byte_of(ct_word, i) == CRUST_OCEANIC && z < u.ridge_elevation_km
-            && fronts[sp].is_active != 0u) {
+        if (u.isostatic == 0u && sp != NO_POINT && byte_of(ct_word, i) == CRUST_OCEANIC
+            && z < u.ridge_elevation_km && fronts[sp].is_active != 0u) {
             let d = sd - fronts[sp].converged_km;
             if (d >= 0.0 && d < u.trench_width_km) {
                 let trench_z = u.trench_elevation_km

@@ -236,11 +236,28 @@ fn subduction_uplift_kernel_matches_cpu_reference() {
     // Poisoned host copy: every field the kernel writes must come back from the device.
     let mut gpu = crust.clone();
     gpu.elevation_km.fill(f32::NAN);
+    gpu.thickness_km.fill(f32::NAN);
     gpu.orogeny_age_my.fill(f32::NAN);
     gpu.fold_dir.fill([f32::NAN; 3]);
     read_back(&mut ctx, &mut gpu).expect("readback");
     let mut cpu = crust.clone();
     subduction_uplift_cpu(&k, &fp, &field, &mut cpu);
+    // Thickness: the uplift times 1/(1 − ρ_c/ρ_m) ≈ 6.6, so the elevation's 2e-5 km becomes
+    // about 1.3e-4 km; within 2e-4 km (20 cm) on values up to the cap.
+    let thickened = (0..N)
+        .filter(|&i| cpu.thickness_km[i] > crust.thickness_km[i])
+        .count();
+    assert!(thickened > N / 5, "seed {seed}: only {thickened} samples thickened");
+    for i in 0..N {
+        let d = (gpu.thickness_km[i] - cpu.thickness_km[i]).abs();
+        assert!(
+            d <= 2e-4,
+            "seed {seed}: thickness at {i}: gpu {} cpu {} (input {})",
+            gpu.thickness_km[i],
+            cpu.thickness_km[i],
+            crust.thickness_km[i]
+        );
+    }
     let changed = (0..N)
         .filter(|&i| cpu.elevation_km[i] != crust.elevation_km[i])
         .count();
@@ -319,6 +336,9 @@ fn collision_uplift_kernel_matches_cpu_reference() {
                 planet_radius_km: r_km,
                 max_elevation_km: params.continent.max_elevation_km,
                 centroid: tectonic_planets::random::unit_vector(rng.next_u64(), rng.next_u64()),
+                thickening: 1.0 / 0.1515,
+                max_thickness_km: 45.0 + rng.next_f64() * 40.0,
+                isostatic: k % 2 == 1,
             };
             (surge, dist)
         })
@@ -333,6 +353,7 @@ fn collision_uplift_kernel_matches_cpu_reference() {
     // Poisoned host copy: every field the kernel writes must come back from the device.
     let mut gpu = crust.clone();
     gpu.elevation_km.fill(f32::NAN);
+    gpu.thickness_km.fill(f32::NAN);
     gpu.orogeny_age_my.fill(f32::NAN);
     gpu.fold_dir.fill([f32::NAN; 3]);
     gpu.orogeny.fill(Orogeny::Andean);
@@ -411,9 +432,27 @@ fn collision_uplift_kernel_matches_cpu_reference() {
             );
         }
     }
+    // Thickness: the uplift times 1/0.1515 in f32 on the device, in f64 on the host, on
+    // values up to 85 km: within 1e-4 km (10 cm); some samples must reach the cap.
+    let mut max_dt = 0.0f32;
+    for i in 0..N {
+        let d = (gpu.thickness_km[i] - cpu.thickness_km[i]).abs();
+        max_dt = max_dt.max(d);
+        assert!(
+            d <= 1e-4,
+            "seed {seed}: thickness at {i}: gpu {} cpu {} (input {})",
+            gpu.thickness_km[i],
+            cpu.thickness_km[i],
+            crust.thickness_km[i]
+        );
+    }
+    let thickened = (0..N)
+        .filter(|&i| cpu.thickness_km[i] > crust.thickness_km[i])
+        .count();
+    assert!(thickened > N / 5, "seed {seed}: only {thickened} samples thickened");
     eprintln!(
         "collision_uplift: {raised} raised, {himalayan} new orogenies, {flips} flips, \
-         elevation within {max_dz:e} km, fold within {max_fold:e}"
+         elevation within {max_dz:e} km, thickness within {max_dt:e} km, fold within {max_fold:e}"
     );
     assert!(
         flips * 1000 <= N,

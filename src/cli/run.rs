@@ -224,6 +224,9 @@ pub(crate) fn write_outputs(sim: &mut Simulation, out: &Path, width: u32) -> Res
     )?;
     let mut files = write_all_maps(&raster, out, sim.params().planet.radius_km)?;
     let summary = summarize(sim, &view);
+    let hyps_path = out.join("hypsometry.png");
+    tectonic_planets::io::hypsometry::write_hypsometry_png(&summary.hypsometry, &hyps_path, 900)?;
+    files.push(hyps_path);
     let summary_path = out.join("summary.json");
     std::fs::write(&summary_path, serde_json::to_string_pretty(&summary)?)
         .with_context(|| format!("could not write {}", summary_path.display()))?;

@@ -33,6 +33,13 @@ pub struct CollisionSurge {
     pub max_elevation_km: f64,
     /// The terrane's centroid (world frame, unit vector); fold directions point away from it.
     pub centroid: DVec3,
+    /// Crust thickening per km of uplift, km/km (1/(1 − ρ_c/ρ_m)).
+    pub thickening: f64,
+    /// Thickest crust the surge makes, km.
+    pub max_thickness_km: f64,
+    /// Isostatic relief: the surge thickens the crust and leaves the elevation to isostasy;
+    /// otherwise it raises the elevation (the paper's) and the thickness stays.
+    pub isostatic: bool,
 }
 
 const KERNEL: &str = "collision_uplift";
@@ -58,6 +65,14 @@ pub struct CollisionUniforms {
     pub count: u32,
     /// Threads (words of four samples) per dispatch row.
     pub row_stride: u32,
+    /// Crust thickening per km of uplift.
+    pub thickening: f32,
+    /// Thickest crust the surge makes, km.
+    pub max_thickness_km: f32,
+    /// 1: isostatic relief (thicken only), 0: the paper's (raise the elevation).
+    pub isostatic: u32,
+    /// Padding to 16 bytes.
+    pub _pad: u32,
 }
 
 impl CollisionUniforms {
@@ -76,6 +91,10 @@ impl CollisionUniforms {
             max_elevation_km: s.max_elevation_km as f32,
             count,
             row_stride: ROW_STRIDE,
+            thickening: s.thickening as f32,
+            max_thickness_km: s.max_thickness_km as f32,
+            isostatic: u32::from(s.isostatic),
+            _pad: 0,
         }
     }
 }
@@ -188,6 +207,7 @@ pub fn collision_uplift_gpu(
                     entry(5, &b.crust_type),
                     entry(6, pb),
                     entry(7, db),
+                    entry(8, &b.thickness_km),
                 ],
             });
             k.bind_group = Some(bg);
@@ -209,9 +229,11 @@ pub fn collision_uplift_gpu(
     })
 }
 
-/// The fields the kernel writes on the device: elevation, orogeny, orogeny age, fold direction.
+/// The fields the kernel writes on the device: elevation, thickness, orogeny, orogeny age, fold
+/// direction.
 pub const WRITES: FieldMask = FieldMask(
     FieldMask::ELEVATION.0
+        | FieldMask::THICKNESS.0
         | FieldMask::OROGENY.0
         | FieldMask::OROGENY_AGE.0
         | FieldMask::FOLD_DIR.0,

@@ -10,8 +10,8 @@ use super::context::GpuContext;
 use crate::resources::Crust;
 
 /// A set of the resident crust fields (bits), used to record which ones the device holds newer
-/// than the host [`Crust`] (the first five bits, [`FieldMask::ALL`]) and which ones a host
-/// writer declares ([`write_crust_fields`], any bit).
+/// than the host [`Crust`] (the six fields kernels write, [`FieldMask::ALL`]) and which ones a
+/// host writer declares ([`write_crust_fields`], any bit).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct FieldMask(pub u16);
 
@@ -28,10 +28,11 @@ impl FieldMask {
     pub const OROGENY_AGE: Self = Self(8);
     /// Fold direction.
     pub const FOLD_DIR: Self = Self(16);
-    /// Every field a kernel writes (crust type is never written on the device).
-    pub const ALL: Self = Self(31);
-    /// Crust thickness (no kernel writes it).
+    /// Crust thickness (the uplift kernels thicken the crust).
     pub const THICKNESS: Self = Self(32);
+    /// Every field a kernel writes (crust type, ridge direction and plate are never written on
+    /// the device).
+    pub const ALL: Self = Self(63);
     /// Ridge direction (no kernel writes it).
     pub const RIDGE_DIR: Self = Self(64);
     /// Plate id (no kernel writes it).
@@ -83,7 +84,7 @@ pub struct CrustBuffers {
     pub orogeny_age_my: wgpu::Buffer,
     /// Fold direction, three f32 per sample, plate frame.
     pub fold_dir: wgpu::Buffer,
-    /// Crust thickness, f32 per sample, km (no kernel writes it; the resampling reads it).
+    /// Crust thickness, f32 per sample, km (the uplift kernels thicken it).
     pub thickness_km: wgpu::Buffer,
     /// Ridge direction, three f32 per sample, plate frame (no kernel writes it; the
     /// resampling reads it).
@@ -279,7 +280,7 @@ impl GpuContext {
         if want.is_empty() {
             return Ok(());
         }
-        let Some((n, z, age, og, oga, fold)) = self.crust.as_ref().map(|b| {
+        let Some((n, z, age, og, oga, fold, th)) = self.crust.as_ref().map(|b| {
             (
                 b.len,
                 b.elevation_km.clone(),
@@ -287,6 +288,7 @@ impl GpuContext {
                 b.orogeny.clone(),
                 b.orogeny_age_my.clone(),
                 b.fold_dir.clone(),
+                b.thickness_km.clone(),
             )
         }) else {
             return Err(GpuError::Kernel {
@@ -307,6 +309,14 @@ impl GpuContext {
                 bytemuck::cast_slice_mut(&mut crust.elevation_km),
             )?;
             self.device_newer.0 &= !FieldMask::ELEVATION.0;
+        }
+        if want.contains(FieldMask::THICKNESS) {
+            self.download(
+                KERNEL,
+                &th,
+                bytemuck::cast_slice_mut(&mut crust.thickness_km),
+            )?;
+            self.device_newer.0 &= !FieldMask::THICKNESS.0;
         }
         if want.contains(FieldMask::AGE) {
             self.download(KERNEL, &age, bytemuck::cast_slice_mut(&mut crust.age_my))?;

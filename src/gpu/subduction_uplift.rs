@@ -46,10 +46,29 @@ pub struct UpliftConstants {
     pub rate: f64,
     /// z_r: ridge elevation, km.
     pub z_r: f64,
+    /// Continental crust thickening per km of uplift, km/km: 1/(1 − ρ_c/ρ_m), so that the uplift
+    /// is the surface rise before erosion once isostasy compensates the new crust.
+    pub thickening: f64,
+    /// Thickest continental crust the uplift makes, km.
+    pub max_thickness_km: f64,
+    /// Oceanic crust thickening per km of uplift: 1/((ρ_m − ρ_s)/(ρ_m − ρ_w)), the inverse of the
+    /// sea floor's rise per km of crust above the normal oceanic thickness.
+    pub oceanic_thickening: f64,
+    /// Thickest oceanic crust the uplift makes (island arcs), km.
+    pub max_oceanic_thickness_km: f64,
+    /// Isostatic relief ([`ReliefMode`](crate::resources::ReliefMode)): the uplift thickens the
+    /// crust and leaves the elevation (and the trench) to isostasy; otherwise it raises the
+    /// elevation and cuts the trench, as the paper does, and the thickness stays.
+    pub isostatic: bool,
 }
 
 impl UpliftConstants {
-    /// The constants for `params`.
+    /// The same constants for isostatic relief (`true`) or the paper's (`false`).
+    pub fn with_isostasy(self, isostatic: bool) -> Self {
+        Self { isostatic, ..self }
+    }
+
+    /// The constants for `params` (the paper's relief; see [`Self::with_isostasy`]).
     pub fn new(params: &Params) -> Self {
         let s = &params.subduction;
         Self {
@@ -65,6 +84,11 @@ impl UpliftConstants {
             wt: s.trench_width_km,
             rate: s.trench_rate,
             z_r: params.ocean.ridge_elevation_km,
+            thickening: 1.0 / crate::resources::params::dry_isostatic_gain(params),
+            max_thickness_km: params.isostasy.max_thickness_km,
+            oceanic_thickening: 1.0 / crate::resources::params::oceanic_load_gain(params),
+            max_oceanic_thickness_km: params.isostasy.max_oceanic_thickness_km,
+            isostatic: false,
         }
     }
 }
@@ -98,6 +122,18 @@ pub struct UpliftUniforms {
     pub count: u32,
     /// Threads (words of four samples) per dispatch row.
     pub row_stride: u32,
+    /// Continental crust thickening per km of uplift.
+    pub thickening: f32,
+    /// Thickest continental crust the uplift makes, km.
+    pub max_thickness_km: f32,
+    /// Oceanic crust thickening per km of uplift.
+    pub oceanic_thickening: f32,
+    /// Thickest oceanic crust the uplift makes, km.
+    pub max_oceanic_thickness_km: f32,
+    /// 1: isostatic relief (thicken only), 0: the paper's (raise the elevation, cut trenches).
+    pub isostatic: u32,
+    /// Padding to 16 bytes.
+    pub _pad: [u32; 3],
 }
 
 impl UpliftUniforms {
@@ -123,6 +159,12 @@ impl UpliftUniforms {
             trench_rate: k.rate as f32,
             count,
             row_stride: ROW_STRIDE,
+            thickening: k.thickening as f32,
+            max_thickness_km: k.max_thickness_km as f32,
+            oceanic_thickening: k.oceanic_thickening as f32,
+            max_oceanic_thickness_km: k.max_oceanic_thickness_km as f32,
+            isostatic: u32::from(k.isostatic),
+            _pad: [0; 3],
         }
     }
 }
@@ -305,6 +347,7 @@ pub fn subduction_uplift_dispatch(
                     entry(5, &b.crust_type),
                     entry(6, fb),
                     entry(7, frb),
+                    entry(8, &b.thickness_km),
                 ],
             });
             kern.bind_group = Some(bg);

@@ -6,6 +6,7 @@ pub mod export;
 pub mod geotiff;
 pub mod gltf;
 pub mod heightmap;
+pub mod hypsometry;
 pub mod maps;
 pub mod save;
 pub mod summary;

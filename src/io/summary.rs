@@ -47,6 +47,8 @@ pub struct Summary {
     pub timings_ms: BTreeMap<String, f64>,
     /// Global resamplings performed.
     pub resamplings: u64,
+    /// The relief against Earth's: bands, means, the ocean mode, the W1 gap.
+    pub hypsometry: crate::io::hypsometry::Hypsometry,
 }
 
 /// Area-weighted elevation percentiles of a crust, metres.
@@ -102,6 +104,7 @@ pub fn summarize(sim: &Simulation, view: &Crust) -> Summary {
         elevation_m: elevation_summary(mesh, view),
         timings_ms,
         resamplings: sim.clock().resamplings,
+        hypsometry: crate::io::hypsometry::hypsometry(mesh, view),
     }
 }
 

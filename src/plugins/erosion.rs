@@ -19,10 +19,13 @@ pub struct ErosionPlugin;
 
 impl Plugin for ErosionPlugin {
     fn build(&self, app: &mut App) {
-        app.register_phenomenon(
+        // Off by default: with isostasy on, the relief phenomena (drainage, rivers, sediment)
+        // replace it; it is the paper's law, for paper parity with isostasy off.
+        app.register_phenomenon_with_default(
             EROSION,
             TectonicSystems::Erosion,
-            "continental erosion, oceanic damping, sediment accretion",
+            "the paper's erosion law: continental erosion, oceanic damping, trench accretion",
+            false,
         );
         app.add_systems(
             TectonicStep,

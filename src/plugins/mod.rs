@@ -6,13 +6,17 @@ pub mod aging;
 pub mod collision;
 pub mod convergence_state;
 pub mod diagnostics;
+pub mod drainage;
 pub mod drift;
 pub mod erosion;
 pub mod hotspots;
+pub mod isostasy;
 pub mod oceanic_crust;
 pub mod resample;
 pub mod rifting;
+pub mod rivers;
 pub mod schedule;
+pub mod sediment;
 pub mod slab_pull;
 pub mod subduction;
 pub mod terranes;
@@ -22,17 +26,21 @@ use bevy_app::{PluginGroup, PluginGroupBuilder};
 pub use aging::AgingPlugin;
 pub use collision::CollisionPlugin;
 pub use diagnostics::DiagnosticsPlugin;
+pub use drainage::DrainagePlugin;
 pub use drift::DriftPlugin;
 pub use erosion::ErosionPlugin;
 pub use hotspots::HotspotPlugin;
+pub use isostasy::IsostasyPlugin;
 pub use oceanic_crust::OceanicCrustPlugin;
 pub use resample::ResamplePlugin;
 pub use rifting::RiftingPlugin;
+pub use rivers::RiversPlugin;
 pub use schedule::{
     AfterResample, AfterResampleSystems, AgingSystems, Phenomena, Phenomenon, PhenomenonAppExt,
     PhenomenonInfo, ResampleSystems, TectonicSchedulePlugin, TectonicStep, TectonicSystems,
     UnknownPhenomenon, phenomenon_enabled,
 };
+pub use sediment::SedimentPlugin;
 pub use slab_pull::SlabPullPlugin;
 pub use subduction::SubductionPlugin;
 pub use terranes::TerranePlugin;
@@ -49,9 +57,13 @@ impl PluginGroup for TectonicPlugins {
             .add(DriftPlugin)
             .add(SubductionPlugin)
             .add(ErosionPlugin)
+            .add(DrainagePlugin)
+            .add(RiversPlugin)
+            .add(SedimentPlugin)
             .add(SlabPullPlugin)
             .add(RiftingPlugin)
             .add(AgingPlugin)
+            .add(IsostasyPlugin)
             .add(ResamplePlugin)
             .add(TerranePlugin)
             .add(OceanicCrustPlugin)

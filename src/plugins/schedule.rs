@@ -4,15 +4,20 @@
 //! 1. [`TectonicSystems::Collision`]: continental collisions (discrete events).
 //! 2. [`TectonicSystems::Drift`]: plates turn about their Euler poles.
 //! 3. [`TectonicSystems::Subduction`]: uplift at converging boundaries.
-//! 4. [`TectonicSystems::Erosion`]: continental erosion, oceanic damping, sediment accretion.
-//! 5. [`TectonicSystems::SlabPull`]: subducting plates turn toward their fronts.
-//! 6. [`TectonicSystems::Rifting`]: plates break apart.
-//! 7. [`TectonicSystems::Aging`]: crust and orogenies age (the clock first, then the crust, then
-//!    plugins that build on this step's ages: [`AgingSystems`]).
-//! 8. [`TectonicSystems::Resample`]: global resampling when due, in three chained sub-sets
-//!    ([`ResampleSystems::Interpolate`], [`ResampleSystems::FillGaps`],
-//!    [`ResampleSystems::Rebuild`]).
-//! 9. [`TectonicSystems::Diagnostics`]: statistics and checks.
+//! 4. [`TectonicSystems::Erosion`]: the paper's continental erosion, oceanic damping and
+//!    sediment accretion (off by default: the relief phenomena below replace it).
+//! 5. [`TectonicSystems::Drainage`]: the drainage network of the surface.
+//! 6. [`TectonicSystems::Rivers`]: stream-power incision and hillslope diffusion.
+//! 7. [`TectonicSystems::Sediment`]: what was eroded is laid down.
+//! 8. [`TectonicSystems::Isostasy`]: the elevation follows from the crust (thickness, age).
+//! 9. [`TectonicSystems::SlabPull`]: subducting plates turn toward their fronts.
+//! 10. [`TectonicSystems::Rifting`]: plates break apart.
+//! 11. [`TectonicSystems::Aging`]: crust and orogenies age (the clock first, then the crust,
+//!     then plugins that build on this step's ages: [`AgingSystems`]).
+//! 12. [`TectonicSystems::Resample`]: global resampling when due, in three chained sub-sets
+//!     ([`ResampleSystems::Interpolate`], [`ResampleSystems::FillGaps`],
+//!     [`ResampleSystems::Rebuild`]).
+//! 13. [`TectonicSystems::Diagnostics`]: statistics and checks.
 //!
 //! After every global resampling the [`AfterResample`] schedule rebuilds what depends on the
 //! plates ([`AfterResampleSystems`]: collision uplift, terranes, fronts, then plugin state
@@ -66,8 +71,16 @@ pub enum TectonicSystems {
     Drift,
     /// Subduction uplift.
     Subduction,
-    /// Erosion, damping, sediment accretion.
+    /// The paper's erosion, damping, sediment accretion.
     Erosion,
+    /// The drainage network.
+    Drainage,
+    /// River incision and hillslope diffusion.
+    Rivers,
+    /// Sediment deposition.
+    Sediment,
+    /// Elevation from the crust.
+    Isostasy,
     /// Slab pull.
     SlabPull,
     /// Plate rifting.
@@ -82,11 +95,15 @@ pub enum TectonicSystems {
 
 impl TectonicSystems {
     /// Every set, in step order.
-    pub const ALL: [TectonicSystems; 9] = [
+    pub const ALL: [TectonicSystems; 13] = [
         Self::Collision,
         Self::Drift,
         Self::Subduction,
         Self::Erosion,
+        Self::Drainage,
+        Self::Rivers,
+        Self::Sediment,
+        Self::Isostasy,
         Self::SlabPull,
         Self::Rifting,
         Self::Aging,
@@ -100,9 +117,13 @@ impl TectonicSystems {
             Self::Drift => "drift",
             Self::Subduction => "subduction",
             Self::Erosion => "erosion",
+            Self::Drainage => "drainage",
+            Self::Rivers => "rivers",
+            Self::Sediment => "sediment",
             Self::SlabPull => "slab_pull",
             Self::Rifting => "rifting",
             Self::Aging => "aging",
+            Self::Isostasy => "isostasy",
             Self::Resample => "resample",
             Self::Diagnostics => "diagnostics",
         }
@@ -206,6 +227,7 @@ impl Plugin for TectonicSchedulePlugin {
         app.init_resource::<Phenomena>()
             .init_resource::<StepTimings>()
             .init_resource::<SimClock>()
+            .init_resource::<crate::resources::ReliefMode>()
             .init_resource::<ResampleRequest>()
             .init_resource::<resample::ResampleWork>()
             .init_resource::<diagnostics::CrustHealth>()

@@ -39,6 +39,16 @@ pub struct SimClock {
     pub resamplings: u64,
 }
 
+/// How the crust's relief is made (a resource, mirrored from the phenomenon switches at the start
+/// of every step by the simulation): with `isostatic`, subduction and collisions thicken the
+/// crust and the `isostasy` phenomenon derives the elevation; without, they raise the elevation
+/// directly and cut trenches into it, as the paper does.
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ReliefMode {
+    /// The `isostasy` phenomenon is on.
+    pub isostatic: bool,
+}
+
 /// Set by any system or command to ask for a global resampling at the end of this step.
 #[derive(Resource, Clone, Debug, Default, PartialEq, Eq)]
 pub struct ResampleRequest(pub bool);

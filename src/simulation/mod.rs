@@ -24,6 +24,7 @@ use bevy_ecs::schedule::{ScheduleLabel, Schedules};
 
 use crate::components::{Plate, PlateBounds, PlateFrame, PlateMesh, PlateMotion, PlateStats};
 use crate::geometry::{MeshError, SphereMesh};
+use crate::plugins::isostasy::ISOSTASY;
 use crate::plugins::oceanic_crust::OCEANIC_CRUST;
 use crate::plugins::{
     AfterResample, Phenomena, PhenomenonInfo, TectonicPlugins, TectonicSchedulePlugin,
@@ -33,7 +34,8 @@ use crate::random::StableHasher;
 use crate::resources::params::{ParamError, Params};
 use crate::resources::plugin_params::{PluginConfig, PluginParams};
 use crate::resources::{
-    Crust, CrustStats, NextPlateId, NonFinite, PlateTable, ResampleRequest, SimClock, StepTimings,
+    Crust, CrustStats, NextPlateId, NonFinite, PlateTable, ReliefMode, ResampleRequest, SimClock,
+    StepTimings,
 };
 use crate::systems::diagnostics::{CrustHealth, crust_stats};
 use crate::systems::{init, oceanic_crust, resample};
@@ -74,17 +76,30 @@ pub enum SimError {
 /// which the schedules refuse, or a cycle) are reported here as an error instead of a panic at
 /// the first step.
 fn build_schedules(app: &mut App) -> Result<(), String> {
-    app.world_mut()
-        .resource_scope(|world, mut schedules: Mut<Schedules>| {
-            for label in [TectonicStep.intern(), AfterResample.intern()] {
-                if let Some(schedule) = schedules.get_mut(label) {
-                    schedule
-                        .initialize(world)
-                        .map_err(|e| format!("{label:?}: {e}"))?;
-                }
-            }
-            Ok(())
-        })
+    let world = app.world_mut();
+    for label in [TectonicStep.intern(), AfterResample.intern()] {
+        // Out of `Schedules` while it is built: building reads `Schedules` itself.
+        let Some(mut schedule) = world.resource_mut::<Schedules>().remove(label) else {
+            continue;
+        };
+        let built = schedule.initialize(world);
+        world.resource_mut::<Schedules>().insert(schedule);
+        built.map_err(|e| format!("{label:?}: {e}"))?;
+    }
+    Ok(())
+}
+
+/// Mirrors the `isostasy` switch into [`ReliefMode`], which the uplift kernels read (they live
+/// below the plugins and cannot see the switches).
+fn sync_relief_mode(world: &mut World) {
+    let isostatic = world
+        .get_resource::<Phenomena>()
+        .is_some_and(|p| p.is_enabled(ISOSTASY.name()));
+    if let Some(mut mode) = world.get_resource_mut::<ReliefMode>()
+        && mode.isostatic != isostatic
+    {
+        mode.isostatic = isostatic;
+    }
 }
 
 /// A running planet: the ECS world and its step schedule.
@@ -130,6 +145,7 @@ impl Simulation {
             world.spawn(Plate::bundle(p.id, p.motion));
         }
         resample::rebuild_plate_entities(world, &[]);
+        sync_relief_mode(world);
         let _ = world.try_run_schedule(AfterResample);
         timings.record("initial_planet", t1.elapsed());
         *world.resource_mut::<StepTimings>() = timings;
@@ -164,6 +180,7 @@ impl Simulation {
 
     /// Refreshes the derived resources after a load.
     pub(crate) fn finish_load(&mut self) {
+        sync_relief_mode(self.app.world_mut());
         self.refresh_stats();
     }
 
@@ -177,6 +194,7 @@ impl Simulation {
 
     /// Runs one time step (one run of the [`TectonicStep`] schedule).
     pub fn step(&mut self) -> Result<(), SimError> {
+        sync_relief_mode(self.app.world_mut());
         self.app.world_mut().run_schedule(TectonicStep);
         // A standalone bevy_ecs world keeps a removal message for every component of every
         // despawned entity until its trackers are cleared; without this a long run (fronts,

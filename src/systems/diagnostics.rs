@@ -67,9 +67,9 @@ const REDUCED: FieldMask = FieldMask(
 /// reduction kernel ([`crate::gpu::crust_reduce`]) computes the land bitmask, the elevation
 /// range and the first non-finite index of the device-written fields on the device (N/8 bytes
 /// read back instead of the elevation); the land area is summed on the host in the chunk order
-/// of [`crust_stats`], so the results are the CPU path's. Fields the host holds current
-/// (thickness, ridge direction, and any reduced field not newer on the device) are checked on
-/// the host. If the kernel fails, the error is recorded and the elevation is pulled instead.
+/// of [`crust_stats`], so the results are the CPU path's. Thickness is pulled first when the
+/// device thickened the crust; it, the ridge direction and any reduced field not newer on the
+/// device are checked on the host. If the kernel fails, the error is recorded and the elevation is pulled instead.
 pub fn update_diagnostics(
     mesh: Res<SphereMesh>,
     mut crust: ResMut<Crust>,
@@ -80,6 +80,9 @@ pub fn update_diagnostics(
 ) {
     let mut reduced = None;
     if let Some(mut gpu) = gpu {
+        // Thickness is not reduced on the device: bring it over when a kernel thickened the
+        // crust, so the host check below reads it current.
+        crate::gpu::pull_or_record(&mut gpu, &mut crust, FieldMask::THICKNESS);
         let newer = gpu.device_newer().and(REDUCED);
         if !newer.is_empty() && gpu.failure.is_none() {
             match crate::gpu::crust_reduce::crust_reduce_gpu(&mut gpu) {

@@ -173,6 +173,8 @@ pub fn initial_planet(mesh: &SphereMesh, params: &Params) -> (Crust, Vec<Initial
     let oseed = noise_seed(seed, 4);
     let aseed = noise_seed(seed, 5);
     let i = &params.init;
+    let iso = &params.isostasy;
+    let gain = crate::resources::params::dry_isostatic_gain(params);
     let mut crust = Crust::with_len(n);
     crust
         .elevation_km
@@ -189,7 +191,13 @@ pub fn initial_planet(mesh: &SphereMesh, params: &Params) -> (Crust, Vec<Initial
                     + i.elevation_noise_km * fbm(eseed, p, cont_wl / 3.0, 5);
                 *z = zc as f32;
                 *ct = CrustType::Continental;
-                *e = i.continental_thickness_km as f32;
+                // The crust that stands at this elevation under Airy isostasy (so that isostasy,
+                // when on, keeps the initial relief), thinned toward the coast like a rifted
+                // margin (rifting.margin_thinning_km at the coastline).
+                let taper = 1.0 - smoothstep(0.0, 0.1, h);
+                *e = (iso.reference_thickness_km + (zc - iso.reference_elevation_km) / gain
+                    - params.rifting.margin_thinning_km * taper * taper)
+                    .max(5.0) as f32;
                 *age = (1500.0 + 500.0 * fbm(aseed, p, cont_wl, 3)) as f32;
             } else {
                 let o = &params.ocean;

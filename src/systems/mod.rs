@@ -7,6 +7,7 @@ pub mod drift;
 pub mod erosion;
 pub mod init;
 pub mod oceanic_crust;
+pub mod relief;
 pub mod resample;
 pub mod rifting;
 

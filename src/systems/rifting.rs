@@ -317,6 +317,7 @@ pub fn rift_plate(
         ids.push(id);
     }
     world.resource_mut::<NextPlateId>().0 = next_id;
+    thin_rifted_margins(world, &samples, &labels, &params);
     // Only the plate ids change: on the GPU backend a declared write uploads them (4 B/sample)
     // instead of pulling every stale field and uploading the whole crust next.
     crate::gpu::write_crust_fields_or_record(world, crate::gpu::FieldMask::PLATE, |crust| {
@@ -371,6 +372,81 @@ pub fn rift_plate(
             elapsed_ms,
         });
     Ok(ids)
+}
+
+/// Thins the continental crust of a plate about to break along the new fracture lines:
+/// `rifting.margin_thinning_km·(1 − d/w)²` within `w = rifting.margin_width_km` of the nearest
+/// sample of another fragment (great-circle distance through the plate), never below 5 km. With
+/// isostasy on, the margins then step down to the sea (a stretched, rifted margin) instead of
+/// ending in a cliff.
+fn thin_rifted_margins(world: &mut World, samples: &[u32], labels: &[u8], params: &Params) {
+    let (amount, width) = (
+        params.rifting.margin_thinning_km,
+        params.rifting.margin_width_km,
+    );
+    if amount <= 0.0 || samples.is_empty() {
+        return;
+    }
+    let mesh = world.resource::<SphereMesh>();
+    let n = mesh.len();
+    // Label of each sample of the plate (u32::MAX elsewhere).
+    let mut label_of = vec![u32::MAX; n];
+    for (&s, &l) in samples.iter().zip(labels) {
+        label_of[s as usize] = u32::from(l);
+    }
+    // Seeds: samples with a neighbour of the same plate in another fragment.
+    let seeds: Vec<(u32, u32)> = samples
+        .iter()
+        .filter(|&&s| {
+            let l = label_of[s as usize];
+            mesh.neighbors_of(s as usize).iter().any(|&h| {
+                let lh = label_of[h as usize];
+                lh != u32::MAX && lh != l
+            })
+        })
+        .enumerate()
+        .map(|(k, &s)| (s, k as u32))
+        .collect();
+    if seeds.is_empty() {
+        return;
+    }
+    let origins: Vec<DVec3> = seeds
+        .iter()
+        .map(|&(s, _)| mesh.positions[s as usize])
+        .collect();
+    let mut dist = vec![f32::INFINITY; n];
+    let mut nearest = vec![u32::MAX; n];
+    let mut settled = Vec::new();
+    crate::systems::convergence::propagate_nearest(
+        mesh,
+        &seeds,
+        |k| origins[k as usize],
+        |s, _| label_of[s] != u32::MAX,
+        width / params.planet.radius_km,
+        &mut dist,
+        &mut nearest,
+        &mut settled,
+    );
+    let radius_km = params.planet.radius_km;
+    let thinned: Vec<(u32, f32)> = samples
+        .iter()
+        .filter_map(|&s| {
+            let d = dist[s as usize] as f64 * radius_km;
+            (d < width).then(|| {
+                let x = 1.0 - d / width;
+                (s, (amount * x * x) as f32)
+            })
+        })
+        .collect();
+    crate::gpu::write_crust_fields_or_record(world, crate::gpu::FieldMask::THICKNESS, |crust| {
+        for &(s, dt) in &thinned {
+            let s = s as usize;
+            if crust.crust_type[s] == CrustType::Continental {
+                let t = crust.thickness_km[s];
+                crust.thickness_km[s] = (t - dt).max(5.0f32.min(t));
+            }
+        }
+    });
 }
 
 /// Recomputes samples, triangles, bounding cap and areas of the plates `ids` from

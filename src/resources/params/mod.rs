@@ -239,8 +239,8 @@ define_params! {
     }
     /// Subduction.
     [subduction] Subduction {
-        distance_km: f64 = 1800.0, 10.0..=10000.0, "km", "Subduction distance r_s: reach of the uplift on the overriding plate.";
-        control_distance_km: f64 = 637.0, 1.0..=10000.0, "km", "Distance from the front where subduction uplift peaks (Driftworld r_c = 0.1 R).";
+        distance_km: f64 = 900.0, 10.0..=10000.0, "km", "Subduction distance r_s: reach of the uplift on the overriding plate (paper: 1800 km; 900 km keeps active margins 200–750 km wide, as the Andes, DESIGN §7).";
+        control_distance_km: f64 = 300.0, 1.0..=10000.0, "km", "Distance from the front where subduction uplift peaks (Driftworld: r_c = 0.1 R = 637 km; 300 km puts the range about where arcs stand, 200 km behind the trench, DESIGN §7).";
         uplift_mm_per_yr: f64 = 0.6, 0.0..=100.0, "mm/yr", "Base subduction uplift u0.";
         fold_weight: f64 = 0.1, 0.0..=10.0, "", "β: weight of the relative plate velocity in the fold direction update.";
         slab_pull_perturbation: f64 = 1.0, 0.0..=100.0, "", "Slab pull ε: the Euler pole of a subducting plate turns by 0.01·ε rad/My per radian of subduction front (normalised by front length, so independent of the sample count).";
@@ -250,12 +250,51 @@ define_params! {
     }
     /// Continental collision.
     [collision] Collision {
-        distance_km: f64 = 4200.0, 10.0..=20000.0, "km", "Maximum collision influence distance r_c.";
+        distance_km: f64 = 1500.0, 10.0..=20000.0, "km", "Maximum collision influence distance r_c (paper: 4200 km, which thickens whole continents; 1500 km makes Himalayan belts and plateaus of Tibet's size).";
         coefficient_per_km: f64 = 1.3e-5, 0.0..=1.0, "1/km", "Discrete collision coefficient Δ_c.";
         interpenetration_km: f64 = 300.0, 0.0..=5000.0, "km", "Interpenetration of continental crust that triggers a collision.";
         trapped_ocean_km2: f64 = 50000.0, 0.0..=1e8, "km²", "A patch of oceanic crust smaller than this, enclosed by the continental crust of one plate (an ocean closed by a collision), is welded into the continent at the next resampling.";
         min_terrane_km2: f64 = 100000.0, 0.0..=1e9, "km²", "Terranes smaller than this do not collide: they are forced under the other plate (paper §4.1) and counted as subducted continental crust.";
         max_uplift_km: f64 = 1.0, 0.0..=30.0, "km", "Saturation of the collision surge: Δz = H·(1 − exp(−Δ_c·A/H)), Δ_c·A for small terranes, at most H for continents.";
+    }
+    /// Isostasy: surface elevation from crust thickness (continents, regional Airy) and from
+    /// sea-floor age (ocean, plate cooling); the trench in front of each subduction front.
+    [isostasy] Isostasy {
+        crust_density_g_per_cm3: f64 = 2.8, 1.0..=5.0, "g/cm³", "Density of the crust ρ_c (DESIGN §7).";
+        mantle_density_g_per_cm3: f64 = 3.3, 1.5..=6.0, "g/cm³", "Density of the mantle ρ_m (DESIGN §7); 1 km of extra crust raises the surface by 1 − ρ_c/ρ_m km.";
+        sediment_density_g_per_cm3: f64 = 2.5, 1.1..=5.0, "g/cm³", "Density of marine sediment ρ_s (compacted; Sclater & Christie 1980): oceanic crust thicker than init.oceanic_thickness_km (sediment, arcs, edifices) raises the sea floor by (ρ_m − ρ_s)/(ρ_m − ρ_w) of the excess.";
+        reference_thickness_km: f64 = 35.0, 1.0..=100.0, "km", "Thickness T₀ of the reference continental column.";
+        reference_elevation_km: f64 = 0.3, -5.0..=5.0, "km", "Surface elevation h₀ of the reference continental column (thickness T₀): sets where continents stand relative to the sea.";
+        elastic_thickness_km: f64 = 25.0, 0.0..=200.0, "km", "Elastic thickness T_e of the lithosphere: the width of the regional response (flexure) that holds a range up with the crust around it (Watts 2001; continents 5–100 km). 0: local Airy.";
+        max_flexural_support_km: f64 = 1.5, 0.0..=50.0, "km", "Most the regional response holds a sample above, or pulls it below, its local Airy level (a narrow range stands higher than Airy, the sea floor beside a continent sinks into a moat): it keeps one-sample contrasts (a lake filled with sediment, a sliver of thick crust) from standing kilometres proud over a moat as deep.";
+        parsons_sclater: bool = false, false..=true, "", "Ocean depth by Parsons & Sclater 1977 (2.5 + 0.35·√t, then 6.4 − 3.2·e^(−t/62.8)) instead of GDH1 (Stein & Stein 1992: 2.6 + 0.365·√t, then 5.651 − 2.473·e^(−0.0278·t)).";
+        ridge_depth_offset_km: f64 = 0.2, -3.0..=3.0, "km", "Added to the age–depth law's depth: 0.2 puts the ridge axis near the observed −2.8 km (DESIGN §7).";
+        trench_depth_km: f64 = 3.5, 0.0..=15.0, "km", "Depth of a trench below the sea floor beside it, at the subduction front (observed 3–4 km, DESIGN §7).";
+        trench_width_km: f64 = 150.0, 1.0..=2000.0, "km", "Distance from the front over which the trench shallows to the sea floor (profile (1 − d/w)²: about 90 km wide at half depth).";
+        max_thickness_km: f64 = 90.0, 10.0..=300.0, "km", "Subduction and collisions never thicken continental crust beyond this (about 8.6 km of elevation at the defaults).";
+        max_oceanic_thickness_km: f64 = 30.0, 1.0..=300.0, "km", "Subduction never thickens oceanic crust (island arcs) beyond this (about +3 km on old sea floor at the defaults; real arcs have 20–35 km of crust).";
+    }
+    /// Rivers: the drainage network, stream-power incision and hillslope diffusion.
+    [rivers] Rivers {
+        erodibility_per_my: f64 = 0.5, 0.0..=1000.0, "km^(1−2m)/My", "Erodibility K of stream power E = K·A^m·S^n − E_c (A in km², S in m/m, E in km/My). For m = 0.5, K = 1 is 1e−6/yr in SI (typical 1e−7…1e−5: Stock & Montgomery 1999).";
+        area_exponent: f64 = 0.5, 0.0..=2.0, "", "Exponent m of drainage area (m/n ≈ 0.5: Whipple & Tucker 1999).";
+        slope_exponent: f64 = 1.0, 0.25..=4.0, "", "Exponent n of slope.";
+        incision_threshold_mm_per_yr: f64 = 0.3, 0.0..=100.0, "mm/yr", "Incision threshold E_c: old ranges stop eroding once their stream power falls under it, so they persist (Baldwin, Whipple & Tucker 2003; Tucker & Bras 2000).";
+        reference_spacing_km: f64 = 50.0, 1.0..=1000.0, "km", "Drainage areas are scaled by (this / mean sample spacing), so relief does not depend on the resolution (a width-normalised area).";
+        hillslope_diffusivity_km2_per_my: f64 = 30.0, 0.0..=100000.0, "km²/My", "Diffusivity κ of the land surface (landscape scale; Culling 1960).";
+        min_sea_area_km2: f64 = 250000.0, 0.0..=1e9, "km²", "A body of water below sea level smaller than this, or without oceanic crust, is a lake: it fills with sediment and overflows toward the sea instead of taking the sediment of the land around it (the Caspian is 370,000 km²).";
+        denudation_per_my: f64 = 0.02, 0.0..=10.0, "1/My", "Background denudation: land loses this fraction of its height above sea level per My (weathering and transport below the resolution of the network, which stream power with its threshold leaves out), carried down the network as sediment. 0.02/My is 0.02 mm/yr at 1 km, the rate of old orogens and cratons (Portenga & Bierman 2011); with isostatic rebound, relief left alone then decays over about 300 My.";
+    }
+    /// Sediment: what rivers carry is laid down in lakes, on shelves, slopes and rises, and in
+    /// trenches and basins.
+    [sediment] Sediment {
+        coast_depth_km: f64 = 0.01, 0.0..=1.0, "km", "Water depth of the shelf surface at the shoreline.";
+        shelf_gradient: f64 = 0.0017, 0.0..=0.1, "m/m", "Gradient of the shelf (0.1°, DESIGN §7).";
+        shelf_break_depth_km: f64 = 0.13, 0.0..=2.0, "km", "Depth of the shelf break (about 130 m, DESIGN §7).";
+        outer_shelf_gradient: f64 = 0.0004, 0.0..=0.1, "m/m", "Gradient of the shelf top beyond the break depth (keeps sediment moving seaward).";
+        slope_gradient: f64 = 0.052, 0.001..=1.0, "m/m", "Gradient of the continental slope (3°, DESIGN §7).";
+        slope_base_depth_km: f64 = 2.5, 0.1..=10.0, "km", "Depth of the foot of the continental slope, where the rise begins.";
+        rise_gradient: f64 = 0.0087, 0.0..=1.0, "m/m", "Gradient of the continental rise (0.5°).";
     }
     /// Plate rifting.
     [rifting] Rifting {
@@ -266,6 +305,8 @@ define_params! {
         divergence_speed_mm_per_yr: f64 = 25.0, 0.0..=1000.0, "mm/yr", "Speed at which each fragment moves away from the parent's centroid, added to the parent's own motion.";
         fracture_warp_km: f64 = 400.0, 0.0..=3000.0, "km", "Amplitude of the noise that warps the Voronoi borders between fragments into irregular fracture lines.";
         fracture_wavelength_km: f64 = 2500.0, 100.0..=40000.0, "km", "Wavelength of the fracture-warping noise.";
+        margin_thinning_km: f64 = 12.0, 0.0..=100.0, "km", "Continental crust is thinned by this much at a new rift (stretching), less away from it, so a rifted margin steps down to the sea instead of ending in a cliff; never below 5 km.";
+        margin_width_km: f64 = 200.0, 1.0..=3000.0, "km", "Width of the thinned margin on each side of a rift: the thinning falls as (1 − d/w)².";
     }
     /// Global resampling.
     [resample] Resample {
@@ -274,6 +315,23 @@ define_params! {
         adaptive_displacement_km: f64 = 2000.0, 1.0..=20000.0, "km", "Resample once the fastest plate has moved this far (clamped to the interval bounds); 10 steps at v0, as in the paper.";
         fragment_min_area_km2: f64 = 500000.0, 0.0..=1e9, "km²", "A disconnected piece of a plate smaller than this joins the neighbouring plate; a larger piece becomes a plate of its own.";
     }
+}
+
+/// Surface rise of dry crust per km of thickening under Airy isostasy, 1 − ρ_c/ρ_m (0.1515 at the
+/// defaults; at least 0.001): the factor that turns the paper's uplift, a surface rise, into the
+/// thickening that makes it.
+pub fn dry_isostatic_gain(params: &Params) -> f64 {
+    let i = &params.isostasy;
+    (1.0 - i.crust_density_g_per_cm3 / i.mantle_density_g_per_cm3).max(1e-3)
+}
+
+/// Rise of the sea floor per km of crust above the normal oceanic thickness (sediment, arcs,
+/// edifices), (ρ_m − ρ_s)/(ρ_m − ρ_w) (0.352 at the defaults; at least 0.001).
+pub fn oceanic_load_gain(params: &Params) -> f64 {
+    let i = &params.isostasy;
+    ((i.mantle_density_g_per_cm3 - i.sediment_density_g_per_cm3)
+        / (i.mantle_density_g_per_cm3 - 1.03).max(1e-6))
+    .max(1e-3)
 }
 
 impl Params {

@@ -179,6 +179,9 @@ pub fn collision_uplift(world: &mut World) {
         return;
     }
     let params = world.resource::<Params>().clone();
+    let isostatic = world
+        .get_resource::<crate::resources::ReliefMode>()
+        .is_some_and(|m| m.isostatic);
     let crust_tick = world.get_resource_ref::<Crust>().map(|c| c.last_changed());
     let mut crust = world.remove_resource::<Crust>().unwrap_or_default();
     // On the GPU backend the surges are applied on the device after every distance is known
@@ -194,6 +197,7 @@ pub fn collision_uplift(world: &mut World) {
     let mut dist = vec![f32::INFINITY; mesh.len()];
     let mut label = vec![NONE; mesh.len()];
     let mut settled = Vec::new();
+    let mut in_terrane = vec![false; mesh.len()];
     for (suture, samples) in &applied {
         if samples.is_empty() {
             continue;
@@ -206,10 +210,28 @@ pub fn collision_uplift(world: &mut World) {
         } else {
             0.0
         };
-        let seeds: Vec<(u32, u32)> = samples.iter().map(|&s| (s, s)).collect();
-        dist.iter_mut().for_each(|d| *d = f32::INFINITY);
+        // The surge spreads from the suture, the terrane's samples that touch the plate it
+        // joins (falling back to the whole terrane when none does), through the joined plate: a
+        // belt of thickened crust astride the suture, not a terrane raised whole.
         let to = suture.to_plate;
         let plate = &crust.plate;
+        in_terrane.iter_mut().for_each(|f| *f = false);
+        for &s in samples {
+            in_terrane[s as usize] = true;
+        }
+        let mut seeds: Vec<(u32, u32)> = samples
+            .iter()
+            .filter(|&&s| {
+                mesh.neighbors_of(s as usize)
+                    .iter()
+                    .any(|&h| plate[h as usize] == to && !in_terrane[h as usize])
+            })
+            .map(|&s| (s, s))
+            .collect();
+        if seeds.is_empty() {
+            seeds = samples.iter().map(|&s| (s, s)).collect();
+        }
+        dist.iter_mut().for_each(|d| *d = f32::INFINITY);
         propagate_nearest(
             mesh,
             &seeds,
@@ -226,6 +248,9 @@ pub fn collision_uplift(world: &mut World) {
             planet_radius_km: r_km,
             max_elevation_km: z_c,
             centroid: suture.centroid_world,
+            thickening: 1.0 / crate::resources::params::dry_isostatic_gain(&params),
+            max_thickness_km: params.isostasy.max_thickness_km,
+            isostatic,
         };
         match gpu {
             Some(_) => surges.push((surge, dist.clone())),
@@ -298,7 +323,13 @@ pub fn collision_uplift_cpu(
         if dz <= 0.0 || crust.crust_type[i] != CrustType::Continental {
             continue;
         }
-        crust.elevation_km[i] = (crust.elevation_km[i] as f64 + dz).min(z_c) as f32;
+        if s.isostatic {
+            let t = crust.thickness_km[i];
+            crust.thickness_km[i] =
+                ((t as f64 + dz * s.thickening) as f32).min((s.max_thickness_km as f32).max(t));
+        } else {
+            crust.elevation_km[i] = (crust.elevation_km[i] as f64 + dz).min(z_c) as f32;
+        }
         if dz > 1e-3 && crust.crust_type[i] == CrustType::Continental {
             crust.orogeny[i] = Orogeny::Himalayan;
             crust.orogeny_age_my[i] = 0.0;

@@ -1,5 +1,6 @@
 //! Subduction uplift (paper §4.1): the overriding plate rises by u0·f(d)·g(v)·h(z̃) near its
-//! fronts, with Andean orogeny and fold directions; the subducting plate bends into a trench.
+//! fronts (and its crust thickens by that rise over 1 − ρ_c/ρ_m, so that once isostasy
+//! compensates it the surface stands that much higher; see [`crate::systems::relief`]), with Andean orogeny and fold directions; the subducting plate bends into a trench.
 //! CPU kernel [`subduction_uplift_cpu`], GPU kernel [`crate::gpu::subduction_uplift`]. See
 //! [`super`] for the model.
 #![allow(clippy::needless_range_loop)]
@@ -11,7 +12,7 @@ use crate::gpu::subduction_uplift::UpliftConstants;
 use crate::gpu::{FieldMask, GpuContext, run_or_record};
 use crate::resources::convergence::NONE;
 use crate::resources::params::Params;
-use crate::resources::{ConvergenceField, Crust, CrustType, FrontPoints, Orogeny};
+use crate::resources::{ConvergenceField, Crust, CrustType, FrontPoints, Orogeny, ReliefMode};
 
 /// Driftworld's cubic distance transfer: 1 at the control distance `rc`, 0 at `rs` (and beyond),
 /// clipped at 0 near the front.
@@ -50,9 +51,15 @@ pub fn subduction_uplift_cpu(
         wt,
         rate,
         z_r,
+        thickening,
+        max_thickness_km,
+        oceanic_thickening,
+        max_oceanic_thickness_km,
+        isostatic,
     } = *k;
     (
         crust.elevation_km.par_iter_mut(),
+        crust.thickness_km.par_iter_mut(),
         crust.orogeny.par_iter_mut(),
         crust.orogeny_age_my.par_iter_mut(),
         crust.fold_dir.par_iter_mut(),
@@ -64,7 +71,7 @@ pub fn subduction_uplift_cpu(
     )
         .into_par_iter()
         .with_min_len(4096)
-        .for_each(|(z, og, oga, fold, ct, &od, &op, &sd, &sp)| {
+        .for_each(|(z, th, og, oga, fold, ct, &od, &op, &sd, &sp)| {
             if op != NONE && (od as f64) < rs && fp.active[op as usize] {
                 let k = op as usize;
                 let rel = fp.relative_velocity[k];
@@ -76,11 +83,24 @@ pub fn subduction_uplift_cpu(
                     * zn
                     * zn;
                 if u > 0.0 {
-                    let znew = (*z as f64 + u * dt).min(z_c);
-                    *z = znew as f32;
-                    if znew > 0.0 && u * dt > 1e-4 {
-                        *og = Orogeny::Andean;
-                        *oga = 0.0;
+                    if isostatic {
+                        let (gain, cap) = match *ct {
+                            CrustType::Continental => (thickening, max_thickness_km),
+                            CrustType::Oceanic => (oceanic_thickening, max_oceanic_thickness_km),
+                        };
+                        // Never thinner than it was: the cap only stops thickening.
+                        *th = (*th + (u * dt * gain) as f32).min((cap as f32).max(*th));
+                        if *z > 0.0 && u * dt > 1e-4 {
+                            *og = Orogeny::Andean;
+                            *oga = 0.0;
+                        }
+                    } else {
+                        let znew = (*z as f64 + u * dt).min(z_c);
+                        *z = znew as f32;
+                        if znew > 0.0 && u * dt > 1e-4 {
+                            *og = Orogeny::Andean;
+                            *oga = 0.0;
+                        }
                     }
                     let f = rel * (beta * dt);
                     fold[0] += f.x as f32;
@@ -88,8 +108,10 @@ pub fn subduction_uplift_cpu(
                     fold[2] += f.z as f32;
                 }
             }
-            // Only ocean floor makes a trench (not oceanic specks stranded among continents).
-            if sp != NONE
+            // Only ocean floor makes a trench (not oceanic specks stranded among continents);
+            // with isostatic relief the trench is isostasy's.
+            if !isostatic
+                && sp != NONE
                 && *ct == CrustType::Oceanic
                 && (*z as f64) < z_r
                 && fp.active[sp as usize]
@@ -103,7 +125,7 @@ pub fn subduction_uplift_cpu(
                     }
                 }
             }
-        });
+    });
 }
 
 /// Subduction uplift on overriding plates, fold directions, Andean orogeny, and trenches on
@@ -113,13 +135,14 @@ pub fn subduction_uplift(
     params: Res<Params>,
     fp: Res<FrontPoints>,
     field: Res<ConvergenceField>,
+    mode: Res<ReliefMode>,
     mut crust: ResMut<Crust>,
     gpu: Option<ResMut<GpuContext>>,
 ) {
     if fp.is_empty() || field.overriding_point.len() != crust.len() {
         return;
     }
-    let k = UpliftConstants::new(&params);
+    let k = UpliftConstants::new(&params).with_isostasy(mode.isostatic);
     if let Some(mut gpu) = gpu {
         let (tick, field_tick) = (crust.last_changed(), field.last_changed());
         let done = run_or_record(&mut gpu, |g| {
@@ -134,6 +157,7 @@ pub fn subduction_uplift(
             // The host copy is pulled lazily, by the next CPU reader (see gpu::FieldMask).
             g.note_device_write(
                 FieldMask::ELEVATION
+                    | FieldMask::THICKNESS
                     | FieldMask::OROGENY
                     | FieldMask::OROGENY_AGE
                     | FieldMask::FOLD_DIR,

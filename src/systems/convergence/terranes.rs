@@ -81,8 +81,8 @@ pub fn close_trapped_ocean(world: &mut World) {
     if !crate::gpu::sync_crust_to_host_or_record(world, crate::gpu::FieldMask::ELEVATION) {
         return;
     }
-    let thickness = world.resource::<Params>().init.continental_thickness_km as f32;
-    let mut writes: Vec<(usize, f32)> = Vec::new();
+    let fallback = world.resource::<Params>().init.continental_thickness_km as f32;
+    let mut writes: Vec<(usize, f32, Vec<u32>)> = Vec::new();
     {
         let crust = world.resource::<Crust>();
         let mesh = world.resource::<SphereMesh>();
@@ -114,7 +114,7 @@ pub fn close_trapped_ocean(world: &mut World) {
                 for (u, z) in filled {
                     elevation[u] = z;
                     crust_type[u] = CrustType::Continental;
-                    writes.push((u, z));
+                    writes.push((u, z, mesh.neighbors_of(u).to_vec()));
                 }
                 remaining = next;
             }
@@ -125,10 +125,24 @@ pub fn close_trapped_ocean(world: &mut World) {
         world,
         FieldMask::ELEVATION | FieldMask::CRUST_TYPE | FieldMask::THICKNESS,
         |crust| {
-            for &(u, z) in &writes {
-                crust.elevation_km[u] = z;
-                crust.crust_type[u] = CrustType::Continental;
-                crust.thickness_km[u] = thickness;
+            // In the same order: each welded sample takes the mean thickness of its continental
+            // neighbours (those welded before it included), so the weld leaves no hole in a
+            // thickened crust (with isostasy on, a thin spot would stand kilometres low).
+            for (u, z, nbrs) in &writes {
+                let (mut sum, mut cnt) = (0.0f64, 0u32);
+                for &v in nbrs {
+                    if crust.crust_type[v as usize] == CrustType::Continental {
+                        sum += crust.thickness_km[v as usize] as f64;
+                        cnt += 1;
+                    }
+                }
+                crust.elevation_km[*u] = *z;
+                crust.crust_type[*u] = CrustType::Continental;
+                crust.thickness_km[*u] = if cnt > 0 {
+                    (sum / cnt as f64) as f32
+                } else {
+                    fallback
+                };
             }
         },
     );

@@ -277,7 +277,9 @@ fn spread_continent(
             {
                 next.crust_type[v] = CrustType::Continental;
                 next.elevation_km[v] = next.elevation_km[u].max(0.0);
-                next.thickness_km[v] = thickness;
+                // The crust it continues: no thin spot in a thickened orogen (with isostasy
+                // on, that would stand kilometres low).
+                next.thickness_km[v] = next.thickness_km[u];
                 next.orogeny[v] = next.orogeny[u];
                 next.orogeny_age_my[v] = next.orogeny_age_my[u];
                 next.fold_dir[v] = next.fold_dir[u];

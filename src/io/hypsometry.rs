@@ -1,0 +1,251 @@
+//! The planet's relief against Earth's: area-weighted elevation quantiles and bands, mean land
+//! and ocean elevation, the deep-ocean mode, and the W1 gap (the mean absolute difference between
+//! our elevation quantiles and Earth's, metres) for `summary.json`; and `hypsometry.png`, our
+//! cumulative curve over Earth's.
+//!
+//! Earth's figures are ETOPO1 bedrock (public domain), area-weighted, as listed in
+//! `assets/reference/earth_hypsometry.json` (from DESIGN §7's `earth_hypsometry.json`): land 27.7%,
+//! mean land +651 m, mean ocean −3,627 m.
+
+use std::path::Path;
+use std::sync::OnceLock;
+
+use image::{Rgb, RgbImage};
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::SphereMesh;
+use crate::io::maps::MapError;
+use crate::resources::Crust;
+
+/// Earth's hypsometry (ETOPO1 bedrock, area-weighted).
+#[derive(Clone, Debug, Deserialize)]
+pub struct EarthHypsometry {
+    /// Where the figures come from.
+    pub source: String,
+    /// Fraction of the surface above sea level.
+    pub land_fraction: f64,
+    /// Mean elevation of land, m.
+    pub mean_land_m: f64,
+    /// Mean elevation of the ocean floor, m.
+    pub mean_ocean_m: f64,
+    /// Area fractions at which the quantiles are given.
+    pub quantile_levels: Vec<f64>,
+    /// Elevation quantiles, m.
+    pub quantiles_m: Vec<f64>,
+    /// Edges of the elevation bands, m (one more than the bands).
+    pub band_edges_m: Vec<f64>,
+    /// Area fraction in each band.
+    pub band_fractions: Vec<f64>,
+}
+
+/// Earth's hypsometry, parsed once from the embedded reference.
+pub fn earth() -> &'static EarthHypsometry {
+    static EARTH: OnceLock<EarthHypsometry> = OnceLock::new();
+    EARTH.get_or_init(|| {
+        serde_json::from_str(include_str!("../../assets/reference/earth_hypsometry.json"))
+            .unwrap_or_else(|_| EarthHypsometry {
+                source: "missing".into(),
+                land_fraction: 0.0,
+                mean_land_m: 0.0,
+                mean_ocean_m: 0.0,
+                quantile_levels: Vec::new(),
+                quantiles_m: Vec::new(),
+                band_edges_m: Vec::new(),
+                band_fractions: Vec::new(),
+            })
+    })
+}
+
+/// One elevation band and the fraction of the surface in it, ours and Earth's.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Band {
+    /// Lower edge, m.
+    pub from_m: f64,
+    /// Upper edge, m.
+    pub to_m: f64,
+    /// Our area fraction.
+    pub fraction: f64,
+    /// Earth's.
+    pub earth: f64,
+}
+
+/// The relief of a planet against Earth's (the `hypsometry` block of `summary.json`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Hypsometry {
+    /// Fraction of the surface above sea level.
+    pub land_fraction: f64,
+    /// Mean elevation of land, m.
+    pub mean_land_m: f64,
+    /// Mean elevation of the sea floor, m.
+    pub mean_ocean_m: f64,
+    /// The most common sea-floor depth, m (the centre of the fullest 100 m bin below −1 km).
+    pub ocean_mode_m: f64,
+    /// Fraction of the surface above 3 km.
+    pub above_3km: f64,
+    /// Highest elevation, m.
+    pub max_m: f64,
+    /// Mean absolute difference between our elevation quantiles and Earth's, at Earth's levels
+    /// (0.5% to 99.5%), m.
+    pub w1_gap_m: f64,
+    /// Area fraction in each of Earth's bands.
+    pub bands: Vec<Band>,
+    /// Our elevation quantiles at Earth's levels, m.
+    pub quantiles_m: Vec<f64>,
+}
+
+impl Hypsometry {
+    /// Fraction of the surface between `lo_m` and `hi_m` (Earth's band edges only).
+    pub fn band_fraction(&self, lo_m: f64, hi_m: f64) -> Option<f64> {
+        self.bands
+            .iter()
+            .find(|b| b.from_m == lo_m && b.to_m == hi_m)
+            .map(|b| b.fraction)
+    }
+}
+
+/// The hypsometry of `crust` on `mesh` (area-weighted over the samples).
+pub fn hypsometry(mesh: &SphereMesh, crust: &Crust) -> Hypsometry {
+    let e = earth();
+    let mut pairs: Vec<(f64, f64)> = crust
+        .elevation_km
+        .iter()
+        .zip(&mesh.area_km2)
+        .filter(|(z, _)| z.is_finite())
+        .map(|(&z, &a)| (z as f64 * 1000.0, a))
+        .collect();
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = pairs.iter().map(|p| p.1).sum::<f64>().max(1e-300);
+    // Quantiles at Earth's levels, in one pass.
+    let mut quantiles_m = Vec::with_capacity(e.quantile_levels.len());
+    let mut acc = 0.0;
+    let mut k = 0;
+    for &q in &e.quantile_levels {
+        let target = q * total;
+        while k + 1 < pairs.len() && acc + pairs[k].1 < target {
+            acc += pairs[k].1;
+            k += 1;
+        }
+        quantiles_m.push(pairs.get(k).map_or(0.0, |p| p.0));
+    }
+    let w1_gap_m = if quantiles_m.is_empty() {
+        0.0
+    } else {
+        quantiles_m
+            .iter()
+            .zip(&e.quantiles_m)
+            .map(|(a, b)| (a - b).abs())
+            .sum::<f64>()
+            / quantiles_m.len() as f64
+    };
+    let (mut land, mut land_z, mut sea, mut sea_z, mut high) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let mut bins = vec![0.0f64; 120];
+    for &(z, a) in &pairs {
+        if z > 0.0 {
+            land += a;
+            land_z += a * z;
+        } else {
+            sea += a;
+            sea_z += a * z;
+            if z < -1000.0 {
+                let b = ((-z - 1000.0) / 100.0) as usize;
+                if let Some(bin) = bins.get_mut(b) {
+                    *bin += a;
+                }
+            }
+        }
+        if z > 3000.0 {
+            high += a;
+        }
+    }
+    let mode_bin = bins
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map_or(0, |(i, _)| i);
+    let bands = e
+        .band_edges_m
+        .windows(2)
+        .zip(&e.band_fractions)
+        .map(|(w, &earth)| {
+            let a: f64 = pairs
+                .iter()
+                .filter(|p| p.0 >= w[0] && p.0 < w[1])
+                .map(|p| p.1)
+                .sum();
+            Band {
+                from_m: w[0],
+                to_m: w[1],
+                fraction: a / total,
+                earth,
+            }
+        })
+        .collect();
+    Hypsometry {
+        land_fraction: land / total,
+        mean_land_m: if land > 0.0 { land_z / land } else { 0.0 },
+        mean_ocean_m: if sea > 0.0 { sea_z / sea } else { 0.0 },
+        ocean_mode_m: -1000.0 - 100.0 * (mode_bin as f64 + 0.5),
+        above_3km: high / total,
+        max_m: pairs.last().map_or(0.0, |p| p.0),
+        w1_gap_m,
+        bands,
+        quantiles_m,
+    }
+}
+
+/// Draws `hypsometry.png`: the cumulative area (x, 0 to 100%, from the highest ground) against
+/// elevation (y, −11 to +9 km), ours in red over Earth's in black, with sea level and the
+/// 1 km lines; `width` × `width`·0.6 pixels.
+pub fn write_hypsometry_png(h: &Hypsometry, path: &Path, width: u32) -> Result<(), MapError> {
+    let e = earth();
+    let w = width.clamp(200, 4000);
+    let ht = (w as f64 * 0.6) as u32;
+    let mut img = RgbImage::from_pixel(w, ht, Rgb([255, 255, 255]));
+    let (zmin, zmax) = (-11000.0, 9000.0);
+    let y_of = |z: f64| ((zmax - z) / (zmax - zmin) * (ht - 1) as f64).round() as i64;
+    let x_of = |f: f64| (f * (w - 1) as f64).round() as i64;
+    let put = |img: &mut RgbImage, x: i64, y: i64, c: [u8; 3]| {
+        if x >= 0 && y >= 0 && (x as u32) < w && (y as u32) < ht {
+            img.put_pixel(x as u32, y as u32, Rgb(c));
+        }
+    };
+    for km in -11..=9 {
+        let y = y_of(km as f64 * 1000.0);
+        let c = if km == 0 { [60, 110, 200] } else { [225, 225, 225] };
+        for x in 0..w as i64 {
+            put(&mut img, x, y, c);
+        }
+    }
+    for tenth in 0..=10 {
+        let x = x_of(tenth as f64 / 10.0);
+        for y in 0..ht as i64 {
+            put(&mut img, x, y, [225, 225, 225]);
+        }
+    }
+    // Curves: cumulative area from the top, i.e. level 1 − q at quantile q.
+    let draw = |img: &mut RgbImage, qs: &[f64], c: [u8; 3]| {
+        let pts: Vec<(i64, i64)> = e
+            .quantile_levels
+            .iter()
+            .zip(qs)
+            .map(|(&l, &z)| (x_of(1.0 - l), y_of(z.clamp(zmin, zmax))))
+            .collect();
+        for seg in pts.windows(2) {
+            let ((x0, y0), (x1, y1)) = (seg[0], seg[1]);
+            let n = (x1 - x0).abs().max((y1 - y0).abs()).max(1);
+            for k in 0..=n {
+                let x = x0 + (x1 - x0) * k / n;
+                let y = y0 + (y1 - y0) * k / n;
+                for dy in -1..=1 {
+                    put(img, x, y + dy, c);
+                }
+            }
+        }
+    };
+    draw(&mut img, &e.quantiles_m, [20, 20, 20]);
+    draw(&mut img, &h.quantiles_m, [210, 40, 30]);
+    img.save(path).map_err(|source| MapError::Image {
+        path: path.to_path_buf(),
+        source,
+    })
+}

@@ -1,0 +1,600 @@
+//! Drainage network on the sample graph: single-flow-direction (steepest great-circle descent)
+//! receivers, closed depressions resolved by a priority flood restricted to the basins of the
+//! pits, a topological stack (receivers before donors) and drainage areas.
+//!
+//! Method:
+//! 1. Receivers: each land sample drains to the neighbour of steepest descent
+//!    S = (h_i − h_j) / d_ij (m/m; d_ij great-circle km); ocean samples stand at sea level (0 km)
+//!    for this purpose, so a coastal sample drains to the sea rather than into a trench. This is
+//!    the D8/"steepest descent" rule of O'Callaghan & Mark (1984) on an irregular graph.
+//! 2. Pits (land samples with no strictly lower neighbour) and the basins draining to them are
+//!    found by walking receivers. Samples whose receiver chain reaches the ocean already have a
+//!    monotone path to the sea, so their spill level equals their elevation; a
+//!    Priority-Flood+ε (Barnes, Lehman & Mulla 2014, "Priority-flood: An optimal
+//!    depression-filling and watershed-labeling algorithm", Computers & Geosciences 62) seeded
+//!    from the boundary of the pit basins fills only those basins. Each flooded sample gets a
+//!    water level strictly above the sample it was reached from (next representable f32), so
+//!    the water surface descends strictly to the spill point; samples below their water level
+//!    are *lakes*. The open set is a monotone radix heap, with a FIFO for flooded samples
+//!    (Barnes et al.'s "improved" variant). Lake samples then drain to the sample that flooded
+//!    them; other pit-basin samples keep their steepest receiver unless it now lies above them
+//!    on the water surface, in which case they take the steepest descent on it. Every lake
+//!    thus leads to its outlet and on to the sea (no cycles: the water surface strictly
+//!    decreases along receivers).
+//! 3. Stack: breadth-first from the outlets over the donor lists (Braun & Willett 2013,
+//!    "A very efficient O(n), implicit and parallel method to solve the stream power equation
+//!    governing fluvial incision and landscape evolution", Geomorphology 180–181), so every
+//!    sample comes after its receiver.
+//! 4. Drainage area A_i = Σ_upstream a_j·p_j (km²; p relative precipitation, 1 by default),
+//!    accumulated in reverse stack order.
+//!
+//! A land region with no route to any ocean sample (e.g. a planet without sea) drains to its
+//! lowest sample, which becomes an endorheic sink (receiver = itself, recorded in `sinks`).
+//!
+//! Cost: O(n) for receivers, stack and areas, plus O(k log k) for the k samples in pit basins.
+//! Deterministic: ties go to the lowest neighbour position in the CSR list, the flood breaks
+//! ties by sample index, and all sums are sequential in stack order.
+
+use std::collections::VecDeque;
+
+use rayon::prelude::*;
+
+use super::graph::ReliefGraph;
+
+/// Result and scratch space of [`Drainage::compute`]; reuse one across steps to avoid
+/// allocations.
+#[derive(Clone, Debug, Default)]
+pub struct Drainage {
+    /// Downstream sample of each land sample (a land or an ocean sample); ocean samples and
+    /// endorheic sinks point to themselves.
+    pub receiver: Vec<u32>,
+    /// Great-circle distance to the receiver, km (0 where the receiver is the sample itself).
+    pub receiver_km: Vec<f32>,
+    /// Land samples ordered so that every sample comes after its receiver (breadth-first from
+    /// the outlets). Contains every land sample exactly once.
+    pub stack: Vec<u32>,
+    /// Land: precipitation-weighted drainage area including the sample itself, km².
+    /// Ocean: total drainage area of the rivers that end in this sample (0 if none).
+    pub area_km2: Vec<f64>,
+    /// Land: water surface, km (the lake level where the sample lies in a filled depression,
+    /// otherwise its elevation). Ocean: 0 (sea level).
+    pub water_level_km: Vec<f32>,
+    /// True for ocean samples (copy of the mask used).
+    pub ocean: Vec<bool>,
+    /// Endorheic sinks: land samples without any route to the sea (their receiver is themselves).
+    pub sinks: Vec<u32>,
+    /// Number of pits found before flooding (land samples with no lower neighbour).
+    pub pit_count: usize,
+    /// Number of land samples in flooded depressions (water level above the elevation).
+    pub lake_sample_count: usize,
+    /// Number of samples in pit basins (the flooded region).
+    pub region_count: usize,
+    /// Wall time of the sub-passes of the last call, ms: receivers, pit basins, flood, stack,
+    /// areas.
+    pub timings_ms: [f64; 5],
+    // Scratch.
+    h: Vec<f32>,
+    donor_start: Vec<u32>,
+    donors: Vec<u32>,
+    region: Vec<u32>,
+    /// Per-sample state during one call (0 untouched; see `IN_REGION` etc.), reset before
+    /// returning, so it stays small (u8) and cache-resident.
+    mark: Vec<u8>,
+    seeds: Vec<u32>,
+    path: Vec<u32>,
+    parent: Vec<u32>,
+    land: Vec<u32>,
+    fill: Vec<u32>,
+    heap: RadixHeap,
+    pit_queue: VecDeque<u32>,
+}
+
+const IN_REGION: u8 = 1;
+const DONE: u8 = 2;
+const TO_SEA: u8 = 3;
+const SEED: u8 = 4;
+
+/// Key that orders f32 values totally (as `f32::total_cmp`) when compared as u32.
+#[inline]
+fn order_bits(x: f32) -> u32 {
+    let b = x.to_bits();
+    if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
+}
+
+#[inline]
+fn level_of_bits(b: u32) -> f32 {
+    f32::from_bits(if b >> 31 == 1 { b & 0x7fff_ffff } else { !b })
+}
+
+/// Monotone priority queue on u32 keys (a radix heap, Ahuja, Mehlhorn, Orlin & Tarjan 1990):
+/// valid when no key smaller than the last popped one is pushed, which holds in the priority
+/// flood (levels only rise). Amortised O(log key range) per item, but in practice each item is
+/// moved a couple of times, several times faster than a binary heap. Ties pop in LIFO order.
+#[derive(Clone, Debug, Default)]
+struct RadixHeap {
+    last: u32,
+    len: usize,
+    buckets: Vec<Vec<(u32, u32)>>,
+}
+
+impl RadixHeap {
+    #[inline]
+    fn bucket(&self, key: u32) -> usize {
+        (32 - (key ^ self.last).leading_zeros()) as usize
+    }
+
+    fn clear(&mut self) {
+        self.buckets.resize_with(33, Vec::new);
+        for b in &mut self.buckets {
+            b.clear();
+        }
+        self.len = 0;
+        self.last = 0;
+    }
+
+    /// Pushes `(key, value)`; a key below the last popped one is clamped up to it (cannot
+    /// happen in the flood, but keeps the structure valid).
+    #[inline]
+    fn push(&mut self, key: u32, value: u32) {
+        if self.buckets.len() < 33 {
+            self.buckets.resize_with(33, Vec::new);
+        }
+        let key = key.max(self.last);
+        let b = self.bucket(key);
+        self.buckets[b].push((key, value));
+        self.len += 1;
+    }
+
+    /// Restarts the key range (only when empty): the next pushes may be below the last pop.
+    fn reset_floor(&mut self, key: u32) {
+        if self.len == 0 {
+            self.last = key;
+        }
+    }
+
+    fn pop(&mut self) -> Option<(u32, u32)> {
+        if self.len == 0 || self.buckets.len() < 33 {
+            return None;
+        }
+        if self.buckets[0].is_empty() {
+            let k = (1..33).find(|&k| !self.buckets[k].is_empty())?;
+            let items = std::mem::take(&mut self.buckets[k]);
+            self.last = items.iter().map(|x| x.0).min().unwrap_or(self.last);
+            for &(key, v) in &items {
+                let b = self.bucket(key);
+                self.buckets[b].push((key, v));
+            }
+            // Give the emptied bucket its storage back.
+            let mut items = items;
+            items.clear();
+            if self.buckets[k].is_empty() {
+                self.buckets[k] = items;
+            }
+        }
+        self.len -= 1;
+        self.buckets[0].pop()
+    }
+}
+
+impl Drainage {
+    /// Empty drainage; buffers grow on the first [`Drainage::compute`].
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// True where sample `i` lies under a lake (water level above its elevation).
+    #[inline]
+    pub fn is_lake(&self, i: usize) -> bool {
+        !self.ocean[i] && self.water_level_km[i] > self.h[i]
+    }
+
+    /// Lake depth at sample `i`, km (0 outside lakes and in the ocean).
+    #[inline]
+    pub fn lake_depth_km(&self, i: usize) -> f32 {
+        if self.ocean[i] {
+            0.0
+        } else {
+            (self.water_level_km[i] - self.h[i]).max(0.0)
+        }
+    }
+
+    /// Donors (upstream neighbours draining into `i`) from the last computation.
+    #[inline]
+    pub fn donors_of(&self, i: usize) -> &[u32] {
+        &self.donors[self.donor_start[i] as usize..self.donor_start[i + 1] as usize]
+    }
+
+    /// Builds the network for surface `elevation_km` (km, sea level 0) with `ocean` marking sea
+    /// samples. `precipitation` (relative, dimensionless, ≥ 0; `None` = uniform 1) weights each
+    /// sample's contribution to drainage area. Slices shorter than the graph are read as ocean /
+    /// elevation 0 / precipitation 1; NaN elevations as 0.
+    pub fn compute(
+        &mut self,
+        g: &ReliefGraph,
+        elevation_km: &[f32],
+        ocean: &[bool],
+        precipitation: Option<&[f32]>,
+    ) {
+        let n = g.len();
+        let clock = std::time::Instant::now();
+        let mut lap = {
+            let mut last = 0.0;
+            move || {
+                let now = clock.elapsed().as_secs_f64() * 1e3;
+                let d = now - last;
+                last = now;
+                d
+            }
+        };
+        self.receiver.resize(n, 0);
+        self.receiver_km.resize(n, 0.0);
+        self.area_km2.resize(n, 0.0);
+        self.water_level_km.resize(n, 0.0);
+        self.ocean.resize(n, true);
+        self.h.resize(n, 0.0);
+        self.mark.resize(n, 0);
+        self.parent.resize(n, u32::MAX);
+        self.sinks.clear();
+
+        // Sanitised inputs: routing height (ocean at sea level) and mask.
+        const CH: usize = 8192;
+        self.h
+            .par_chunks_mut(CH)
+            .zip(self.ocean.par_chunks_mut(CH))
+            .zip(self.water_level_km.par_chunks_mut(CH))
+            .enumerate()
+            .for_each(|(c, ((h, o), w))| {
+                let base = c * CH;
+                for k in 0..h.len() {
+                    let i = base + k;
+                    let is_ocean = ocean.get(i).copied().unwrap_or(true);
+                    let z = elevation_km.get(i).copied().unwrap_or(0.0);
+                    o[k] = is_ocean;
+                    let hz = if is_ocean || !z.is_finite() { 0.0 } else { z };
+                    h[k] = hz;
+                    w[k] = hz;
+                }
+            });
+
+        // 1. Steepest-descent receivers (parallel, per-sample: deterministic).
+        {
+            let h = &self.h;
+            let oc = &self.ocean;
+            self.receiver
+                .par_chunks_mut(CH)
+                .zip(self.receiver_km.par_chunks_mut(CH))
+                .enumerate()
+                .for_each(|(c, (rs, ds))| {
+                    let base = c * CH;
+                    for k in 0..rs.len() {
+                        let i = base + k;
+                        let (mut r, mut d) = (i as u32, 0.0f32);
+                        if !oc[i] {
+                            let hi = h[i];
+                            let mut best = 0.0f32;
+                            let (a, b) =
+                                (g.neighbor_start[i] as usize, g.neighbor_start[i + 1] as usize);
+                            let (nb, inv) = (&g.neighbors[a..b], &g.inv_edge_km[a..b]);
+                            for k in 0..nb.len() {
+                                // inv = 0 for degenerate edges: slope 0, never chosen.
+                                let s = (hi - h[nb[k] as usize]) * inv[k];
+                                if s > best {
+                                    best = s;
+                                    r = nb[k];
+                                }
+                            }
+                            if r != i as u32 {
+                                let k = nb.iter().position(|&x| x == r).unwrap_or(0);
+                                d = g.edge_km[a + k];
+                            }
+                        }
+                        rs[k] = r;
+                        ds[k] = d;
+                    }
+                });
+        }
+        self.land.clear();
+        self.land
+            .extend((0..n as u32).filter(|&i| !self.ocean[i as usize]));
+        self.timings_ms[0] = lap();
+
+        // 2. Pits and their basins.
+        self.pit_count = self
+            .land
+            .iter()
+            .filter(|&&i| self.receiver[i as usize] == i)
+            .count();
+        self.region.clear();
+        self.timings_ms[1] = 0.0;
+        if self.pit_count > 0 {
+            self.collect_pit_basins();
+            self.timings_ms[1] = lap();
+            self.flood(g);
+            // Lake samples drain to the sample that flooded them (strictly lower water level,
+            // towards the outlet). Other pit-basin samples keep their steepest-descent receiver
+            // when it is still strictly lower on the water surface, else take the steepest
+            // descent on the water surface (rim samples next to a lake).
+            let done = DONE;
+            for k in 0..self.region.len() {
+                let i = self.region[k] as usize;
+                let li = self.water_level_km[i];
+                if li > self.h[i] {
+                    let pa = self.parent[i];
+                    if pa != u32::MAX {
+                        let d = g
+                            .edges(i)
+                            .find(|&e| g.neighbors[e] == pa)
+                            .map(|e| g.edge_km[e])
+                            .unwrap_or(0.0);
+                        self.receiver[i] = pa;
+                        self.receiver_km[i] = d;
+                        continue;
+                    }
+                }
+                if self.parent[i] == u32::MAX {
+                    continue; // endorheic sink
+                }
+                let r0 = self.receiver[i] as usize;
+                let level = |j: usize| -> f32 {
+                    if self.mark[j] == done { self.water_level_km[j] } else { self.h[j] }
+                };
+                if r0 != i && level(r0) < li {
+                    continue;
+                }
+                let (mut r, mut d, mut best) = (i as u32, 0.0f32, 0.0f32);
+                for e in g.edges(i) {
+                    let j = g.neighbors[e] as usize;
+                    let dist = g.edge_km[e];
+                    if dist <= 0.0 {
+                        continue;
+                    }
+                    let s = (li - level(j)) / dist;
+                    if s > best {
+                        best = s;
+                        r = j as u32;
+                        d = dist;
+                    }
+                }
+                self.receiver[i] = r;
+                self.receiver_km[i] = d;
+            }
+        }
+        self.region_count = self.region.len();
+        self.lake_sample_count = self
+            .region
+            .iter()
+            .filter(|&&i| self.water_level_km[i as usize] > self.h[i as usize])
+            .count();
+        // Reset the marks (land samples and flood seeds only were touched).
+        for &i in &self.land {
+            self.mark[i as usize] = 0;
+        }
+        for &i in &self.seeds {
+            self.mark[i as usize] = 0;
+        }
+        self.seeds.clear();
+        self.timings_ms[2] = lap();
+
+        // 3. Donor lists (CSR, in sample order) and the stack.
+        self.donor_start.clear();
+        self.donor_start.resize(n + 1, 0);
+        for &i in &self.land {
+            let r = self.receiver[i as usize] as usize;
+            if r != i as usize {
+                self.donor_start[r + 1] += 1;
+            }
+        }
+        for i in 0..n {
+            self.donor_start[i + 1] += self.donor_start[i];
+        }
+        self.donors.resize(self.donor_start[n] as usize, 0);
+        self.fill.clear();
+        self.fill.extend_from_slice(&self.donor_start[..n]);
+        self.stack.clear();
+        for &i in &self.land {
+            let r = self.receiver[i as usize] as usize;
+            if r != i as usize {
+                self.donors[self.fill[r] as usize] = i;
+                self.fill[r] += 1;
+            }
+            if r == i as usize || self.ocean[r] {
+                self.stack.push(i);
+            }
+        }
+        let mut head = 0;
+        while head < self.stack.len() {
+            let i = self.stack[head] as usize;
+            head += 1;
+            let (a, b) = (self.donor_start[i] as usize, self.donor_start[i + 1] as usize);
+            self.stack.extend_from_slice(&self.donors[a..b]);
+        }
+        self.timings_ms[3] = lap();
+
+        // 4. Drainage areas (reverse stack order, sequential f64).
+        self.area_km2.iter_mut().for_each(|a| *a = 0.0);
+        for &i in &self.land {
+            let i = i as usize;
+            let p = precipitation
+                .and_then(|p| p.get(i).copied())
+                .filter(|p| p.is_finite())
+                .unwrap_or(1.0)
+                .max(0.0);
+            self.area_km2[i] = g.area_km2[i] * p as f64;
+        }
+        for k in (0..self.stack.len()).rev() {
+            let i = self.stack[k] as usize;
+            let r = self.receiver[i] as usize;
+            if r != i {
+                self.area_km2[r] += self.area_km2[i];
+            }
+        }
+        self.timings_ms[4] = lap();
+    }
+
+    /// Marks every land sample whose receiver chain ends in a pit (mark = epoch) and lists them
+    /// in `region` (in a deterministic order: land order, then down each receiver chain).
+    fn collect_pit_basins(&mut self) {
+        let (in_region, to_sea) = (IN_REGION, TO_SEA);
+        for k in 0..self.land.len() {
+            let start = self.land[k] as usize;
+            if self.mark[start] == in_region || self.mark[start] == to_sea {
+                continue;
+            }
+            self.path.clear();
+            let mut i = start;
+            let verdict = loop {
+                let m = self.mark[i];
+                if m == in_region || m == to_sea {
+                    break m;
+                }
+                self.path.push(i as u32);
+                let r = self.receiver[i] as usize;
+                if r == i {
+                    break in_region;
+                }
+                if self.ocean[r] {
+                    break to_sea;
+                }
+                if self.path.len() > self.land.len() {
+                    break in_region; // cannot happen (strict descent), but never loop forever
+                }
+                i = r;
+            };
+            for &p in &self.path {
+                self.mark[p as usize] = verdict;
+            }
+            if verdict == in_region {
+                self.region.extend_from_slice(&self.path);
+            }
+        }
+    }
+
+    /// Priority-Flood+ε over the pit basins, seeded from their boundary.
+    fn flood(&mut self, g: &ReliefGraph) {
+        let (in_region, done, seed) = (IN_REGION, DONE, SEED);
+        self.heap.clear();
+        self.pit_queue.clear();
+        // Seeds: non-region neighbours of region samples, at their own spill level (their
+        // elevation: they have a descending path to the sea; sea level for ocean samples).
+        for k in 0..self.region.len() {
+            let i = self.region[k] as usize;
+            for e in g.edges(i) {
+                let j = g.neighbors[e] as usize;
+                let m = self.mark[j];
+                if m == in_region || m == done || m == seed {
+                    continue;
+                }
+                self.mark[j] = seed;
+                self.seeds.push(j as u32);
+                self.heap.push(order_bits(self.h[j]), j as u32);
+            }
+        }
+        let mut remaining = self.region.len();
+        loop {
+            while remaining > 0 {
+                let (c, lc) = if let Some(c) = self.pit_queue.pop_front() {
+                    (c as usize, self.water_level_km[c as usize])
+                } else if let Some((k, c)) = self.heap.pop() {
+                    (c as usize, level_of_bits(k))
+                } else {
+                    break;
+                };
+                for e in g.edges(c) {
+                    let j = g.neighbors[e] as usize;
+                    if self.mark[j] != in_region {
+                        continue;
+                    }
+                    self.mark[j] = done;
+                    self.parent[j] = c as u32;
+                    remaining -= 1;
+                    let hj = self.h[j];
+                    let up = lc.next_up();
+                    if hj <= up {
+                        self.water_level_km[j] = up.max(hj);
+                        self.pit_queue.push_back(j as u32);
+                    } else {
+                        self.water_level_km[j] = hj;
+                        self.heap.push(order_bits(hj), j as u32);
+                    }
+                }
+            }
+            if remaining == 0 {
+                break;
+            }
+            // Region samples with no route to the sea: the lowest becomes an endorheic sink.
+            let mut best: Option<(f32, u32)> = None;
+            for &i in &self.region {
+                if self.mark[i as usize] == in_region {
+                    let hi = self.h[i as usize];
+                    if best.is_none_or(|(b, bi)| hi < b || (hi == b && i < bi)) {
+                        best = Some((hi, i));
+                    }
+                }
+            }
+            let Some((hs, s)) = best else { break };
+            self.mark[s as usize] = done;
+            self.parent[s as usize] = u32::MAX;
+            remaining -= 1;
+            self.water_level_km[s as usize] = hs;
+            self.sinks.push(s);
+            self.heap.reset_floor(order_bits(hs));
+            self.heap.push(order_bits(hs), s);
+        }
+        self.sinks.sort_unstable();
+    }
+}
+
+/// Sea mask: the samples at or below sea level (elevation ≤ 0 km) that are open sea. Samples at
+/// or below sea level form connected bodies of water; a body is sea when it holds a sample
+/// flagged in `always_sea` (typically oceanic crust) and covers at least `min_sea_area_km2`.
+/// Any other body (a continental depression, or a speck of ocean floor walled in by land) stays
+/// land, so the drainage pass turns it into a lake that fills and overflows (the Caspian and the
+/// Dead Sea are land basins, not ocean); otherwise one such speck would take the sediment of the
+/// land around it. NaN counts as sea level.
+///
+/// Cost: one breadth-first search over the samples at or below sea level, in index order (the
+/// result does not depend on the thread count).
+pub fn sea_mask(
+    g: &ReliefGraph,
+    elevation_km: &[f32],
+    always_sea: &[bool],
+    min_sea_area_km2: f64,
+    out: &mut Vec<bool>,
+) {
+    let n = g.len();
+    out.clear();
+    out.resize(n, false);
+    let below = |i: usize| -> bool {
+        let z = elevation_km.get(i).copied().unwrap_or(0.0);
+        !(z > 0.0)
+    };
+    let mut seen = vec![false; n];
+    let mut body: Vec<u32> = Vec::new();
+    for start in 0..n {
+        if seen[start] || !below(start) {
+            continue;
+        }
+        body.clear();
+        body.push(start as u32);
+        seen[start] = true;
+        let (mut head, mut area, mut open) = (0, 0.0f64, false);
+        while head < body.len() {
+            let i = body[head] as usize;
+            head += 1;
+            area += g.area_km2[i];
+            open |= always_sea.get(i).copied().unwrap_or(false);
+            for &j in g.neighbors_of(i) {
+                let j = j as usize;
+                if !seen[j] && below(j) {
+                    seen[j] = true;
+                    body.push(j as u32);
+                }
+            }
+        }
+        if open && area >= min_sea_area_km2 {
+            for &i in &body {
+                out[i as usize] = true;
+            }
+        }
+    }
+}

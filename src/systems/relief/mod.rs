@@ -1,0 +1,503 @@
+//! Relief that balances (DESIGN §7): uplift builds relief by thickening the crust; rivers,
+//! hillslopes and isostasy take it back; sediment builds shelves and fills trenches. Four
+//! phenomena, each a plugin, in this order within a step (after subduction):
+//!
+//! 1. **Drainage** ([`drainage`], system [`build_drainage`], set `Drainage`): every land sample
+//!    drains to one neighbour by great-circle slope; closed depressions fill to lakes that
+//!    overflow (priority flood); every river ends in the sea; drainage areas in km².
+//! 2. **Rivers** ([`stream_power`], [`diffusion`], system [`erode_rivers`], set `Rivers`):
+//!    stream-power incision E = K·A^m·S^n − E_c solved implicitly along the network (Braun &
+//!    Willett 2013) and hillslope diffusion. The eroded rock leaves the crust: thickness goes down
+//!    by what the surface lost.
+//! 3. **Sediment** ([`sediment`], system [`deposit_sediment`], set `Sediment`): what was eroded
+//!    travels down the network and is laid down in lakes, on shelves to a break near −130 m, on
+//!    slopes and rises, and in trenches and basins; it thickens the crust it lies on. Deposited
+//!    volume equals eroded volume every step ([`SurfaceFlux`]).
+//! 4. **Isostasy** ([`isostasy`], system [`apply_isostasy`], set `Isostasy`): the elevation
+//!    follows from the crust. Continental crust floats (Airy) with a regional response standing
+//!    in for flexure; ocean floor sinks with age (GDH1 or Parsons–Sclater), raised by what lies
+//!    on it (sediment, arcs: the thickness above `init.oceanic_thickness_km`) and lowered by the
+//!    flexure of neighbouring continents; a trench is cut in front of each active subduction
+//!    front. It runs last (after the sediment), so the maps show the compensated surface.
+//!
+//! With isostasy on, **every change of elevation goes through thickness**: subduction and
+//! collision thicken the crust (the paper's uplift rates read as the surface rise before
+//! compensation, so the crust thickens by Δz/(1 − ρ_c/ρ_m)), erosion thins it, deposition thickens
+//! it, and the elevation is derived. Switched off, the crust keeps the paper's behaviour: the
+//! kernels raise the elevation directly, and the paper's erosion law (phenomenon `erosion`, off
+//! by default) is the one to use.
+//!
+//! The graph is the reference mesh: rivers ignore plate boundaries. Between two resamplings the
+//! plates have moved, so an edge across a boundary joins samples that are no longer side by side;
+//! few rivers cross a boundary, and the next resampling puts the samples back in place.
+
+pub mod diffusion;
+pub mod drainage;
+pub mod graph;
+pub mod isostasy;
+pub mod sediment;
+pub mod stream_power;
+
+use bevy_ecs::prelude::*;
+use rayon::prelude::*;
+
+use self::diffusion::{DiffusionBudget, DiffusionScratch, diffuse_land};
+use self::drainage::{Drainage, sea_mask};
+use self::graph::ReliefGraph;
+use self::isostasy::{AgeDepthLaw, AgeDepthTable, IsostasyParams, RegionalIsostasy};
+use self::sediment::{SedimentBudget, SedimentParams, SedimentRouter};
+use self::stream_power::{StreamPowerParams, StreamPowerScratch, stream_power_erode};
+use crate::geometry::SphereMesh;
+use crate::gpu::{FieldMask, GpuContext, pull_or_record};
+use crate::resources::convergence::NONE;
+use crate::resources::params::Params;
+use crate::resources::{ConvergenceField, Crust, CrustType, FrontPoints};
+
+/// The isostasy constants of `params`.
+pub fn isostasy_params(params: &Params) -> IsostasyParams {
+    let i = &params.isostasy;
+    IsostasyParams {
+        rho_crust: i.crust_density_g_per_cm3,
+        rho_mantle: i.mantle_density_g_per_cm3,
+        rho_water: 1.03,
+        rho_sediment: i.sediment_density_g_per_cm3,
+        ref_thickness_km: i.reference_thickness_km,
+        ref_elevation_km: i.reference_elevation_km,
+        elastic_thickness_km: i.elastic_thickness_km,
+        young_modulus_gpa: 100.0,
+        poisson: 0.25,
+        gravity: 9.81,
+        max_support_km: i.max_flexural_support_km,
+    }
+}
+
+/// The stream-power constants of `params`.
+pub fn stream_power_params(params: &Params) -> StreamPowerParams {
+    let r = &params.rivers;
+    StreamPowerParams {
+        k: r.erodibility_per_my,
+        m: r.area_exponent,
+        n: r.slope_exponent,
+        threshold_km_per_my: r.incision_threshold_mm_per_yr,
+        reference_spacing_km: r.reference_spacing_km,
+        spacing_exponent: 1.0,
+    }
+}
+
+/// The marine deposition profile of `params`.
+pub fn sediment_params(params: &Params) -> SedimentParams {
+    let s = &params.sediment;
+    SedimentParams {
+        coast_depth_km: s.coast_depth_km,
+        shelf_gradient: s.shelf_gradient,
+        shelf_break_depth_km: s.shelf_break_depth_km,
+        outer_shelf_gradient: s.outer_shelf_gradient,
+        slope_gradient: s.slope_gradient,
+        slope_base_depth_km: s.slope_base_depth_km,
+        rise_gradient: s.rise_gradient,
+        ..SedimentParams::default()
+    }
+}
+
+/// The drainage network of the current surface (a resource, rebuilt every step by
+/// [`build_drainage`]): receivers, the stack, drainage areas, lakes, the sea mask.
+#[derive(Resource, Default)]
+pub struct DrainageNetwork {
+    /// The network (see [`Drainage`]).
+    pub drainage: Drainage,
+    /// True once built for the current crust.
+    pub built: bool,
+}
+
+/// Relative rain per sample (1 = the planet's mean; a resource a plugin may set). Drainage
+/// areas are areas weighted by it. Absent or of the wrong length: uniform rain.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct Precipitation(pub Vec<f32>);
+
+/// What the surface processes moved this step (a resource): per sample, km of rock eroded by
+/// rivers, the change by hillslope diffusion and the sediment laid down; and the volumes.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct SurfaceFlux {
+    /// Rock removed by stream power this step, km per sample.
+    pub eroded_km: Vec<f32>,
+    /// Surface change by hillslope diffusion, km per sample (land only).
+    pub diffusion_km: Vec<f32>,
+    /// Volume carried across the coast by diffusion into each ocean sample, km³.
+    pub to_ocean_km3: Vec<f64>,
+    /// Sediment laid down this step, km per sample.
+    pub deposit_km: Vec<f32>,
+    /// Stream-power volume, km³.
+    pub incised_km3: f64,
+    /// Diffusion volumes.
+    pub diffusion: DiffusionBudget,
+    /// Sediment volumes.
+    pub sediment: SedimentBudget,
+    /// Summed over the run: eroded and deposited volumes, km³.
+    pub total_eroded_km3: f64,
+    /// See `total_eroded_km3`.
+    pub total_deposited_km3: f64,
+}
+
+impl SurfaceFlux {
+    /// Volume eroded this step (incision plus diffusion lowering), km³.
+    pub fn eroded_km3(&self) -> f64 {
+        self.incised_km3 + self.diffusion.lowered_km3
+    }
+    /// Volume deposited this step (sediment plus diffusion raising), km³.
+    pub fn deposited_km3(&self) -> f64 {
+        self.sediment.deposited_km3 + self.diffusion.raised_km3
+    }
+}
+
+/// Scratch and cached state of the relief passes (a resource): the sample graph (built once per
+/// mesh), the regional-isostasy levels, the age–depth table, the trench depth of this step.
+#[derive(Resource, Default)]
+pub struct ReliefState {
+    /// The sample graph of the reference mesh.
+    pub graph: Option<ReliefGraph>,
+    iso: RegionalIsostasy,
+    iso_key: Option<(usize, u64)>,
+    table: Option<(bool, u64, AgeDepthTable)>,
+    spl: StreamPowerScratch,
+    diffusion: DiffusionScratch,
+    router: SedimentRouter,
+    oceanic: Vec<bool>,
+    continental: Vec<bool>,
+    fill: Vec<f32>,
+    /// Trench depth below the sea floor beside it, km per sample (0 away from fronts), as cut
+    /// by the last isostasy pass. The fronts add it back to read the floor that arrives at
+    /// the trench.
+    pub trench_km: Vec<f32>,
+}
+
+/// Builds the sample graph of `mesh` into `slot` unless it is there already (true when it was
+/// rebuilt).
+fn ensure_graph(slot: &mut Option<ReliefGraph>, mesh: &SphereMesh) -> bool {
+    if slot.as_ref().is_some_and(|g| g.len() == mesh.len()) {
+        return false;
+    }
+    *slot = Some(ReliefGraph::new(
+        &mesh.positions,
+        &mesh.neighbor_start,
+        &mesh.neighbors,
+        Some(&mesh.triangles),
+        Some(&mesh.area_km2),
+        mesh.radius_km,
+    ));
+    true
+}
+
+/// On the GPU backend, brings the fields of `mask` the device holds newer into the host crust
+/// (without moving its change tick); false when that failed (the step then stops with it).
+fn pull(crust: &mut ResMut<Crust>, gpu: &mut Option<ResMut<GpuContext>>, mask: FieldMask) -> bool {
+    match gpu.as_mut() {
+        Some(g) => pull_or_record(g, crust, mask),
+        None => true,
+    }
+}
+
+/// Builds the drainage network of the current surface (phenomenon `drainage`).
+pub fn build_drainage(
+    params: Res<Params>,
+    mesh: Res<SphereMesh>,
+    mut crust: ResMut<Crust>,
+    mut state: ResMut<ReliefState>,
+    mut network: ResMut<DrainageNetwork>,
+    rain: Option<Res<Precipitation>>,
+    mut gpu: Option<ResMut<GpuContext>>,
+) {
+    if !pull(&mut crust, &mut gpu, FieldMask::ELEVATION) {
+        return;
+    }
+    let state = &mut *state;
+    let n = mesh.len();
+    state.oceanic.clear();
+    state
+        .oceanic
+        .extend(crust.crust_type.iter().map(|&t| t == CrustType::Oceanic));
+    if ensure_graph(&mut state.graph, &mesh) {
+        state.iso_key = None;
+    }
+    let Some(g) = state.graph.as_ref() else {
+        return;
+    };
+    let mut ocean = std::mem::take(&mut network.drainage.ocean);
+    sea_mask(
+        g,
+        &crust.elevation_km,
+        &state.oceanic,
+        params.rivers.min_sea_area_km2,
+        &mut ocean,
+    );
+    let rain = rain.as_ref().map(|r| &r.0[..]).filter(|r| r.len() == n);
+    network
+        .drainage
+        .compute(g, &crust.elevation_km, &ocean, rain);
+    network.built = true;
+}
+
+/// Stream-power incision and hillslope diffusion along the network (phenomenon `rivers`): the
+/// surface is lowered where rivers cut and slopes creep, and the crust thins by as much.
+pub fn erode_rivers(
+    params: Res<Params>,
+    mesh: Res<SphereMesh>,
+    mut crust: ResMut<Crust>,
+    mut state: ResMut<ReliefState>,
+    network: Res<DrainageNetwork>,
+    mut flux: ResMut<SurfaceFlux>,
+    mut gpu: Option<ResMut<GpuContext>>,
+) {
+    if !network.built || network.drainage.receiver.len() != mesh.len() {
+        return;
+    }
+    if !pull(&mut crust, &mut gpu, FieldMask::ALL) {
+        return;
+    }
+    let dt = params.time.time_step_my;
+    let spl = stream_power_params(&params);
+    let kappa = params.rivers.hillslope_diffusivity_km2_per_my;
+    let state = &mut *state;
+    let n = mesh.len();
+    let flux = &mut *flux;
+    flux.eroded_km.resize(n, 0.0);
+    flux.diffusion_km.resize(n, 0.0);
+    flux.to_ocean_km3.clear();
+    flux.to_ocean_km3.resize(n, 0.0);
+    let Some(g) = state.graph.as_ref() else {
+        return;
+    };
+    let crust = &mut *crust;
+    flux.incised_km3 = stream_power_erode(
+        g,
+        &network.drainage,
+        &mut crust.elevation_km,
+        &mut flux.eroded_km,
+        None,
+        &spl,
+        dt,
+        &mut state.spl,
+    );
+    // Background denudation: land loses k·z per My, added to the rock the rivers carry.
+    let k_den = params.rivers.denudation_per_my;
+    if k_den > 0.0 {
+        let ocean = &network.drainage.ocean;
+        let factor = (1.0 - (-k_den * dt).exp()) as f32;
+        let area = &g.area_km2;
+        let extra: f64 = crust
+            .elevation_km
+            .par_iter_mut()
+            .zip(flux.eroded_km.par_iter_mut())
+            .enumerate()
+            .with_min_len(8192)
+            .map(|(i, (z, e))| {
+                if ocean.get(i).copied().unwrap_or(true) || *z <= 0.0 {
+                    return 0.0;
+                }
+                let d = *z * factor;
+                *z -= d;
+                *e += d;
+                d as f64 * area[i]
+            })
+            .collect::<Vec<f64>>()
+            .iter()
+            .sum();
+        flux.incised_km3 += extra;
+    }
+    flux.diffusion = diffuse_land(
+        g,
+        &mut crust.elevation_km,
+        &network.drainage.ocean,
+        kappa,
+        dt,
+        &mut flux.diffusion_km,
+        &mut flux.to_ocean_km3,
+        &mut state.diffusion,
+    );
+    crust
+        .thickness_km
+        .par_iter_mut()
+        .zip(flux.eroded_km.par_iter().zip(flux.diffusion_km.par_iter()))
+        .with_min_len(8192)
+        .for_each(|(t, (&e, &d))| *t += d - e);
+    flux.total_eroded_km3 += flux.eroded_km3();
+    flux.total_deposited_km3 += flux.diffusion.raised_km3;
+}
+
+/// Lays down what the rivers and slopes carried (phenomenon `sediment`): in lakes, on the shelf,
+/// slope and rise, in trenches and basins; the crust thickens by the deposit.
+pub fn deposit_sediment(
+    params: Res<Params>,
+    mesh: Res<SphereMesh>,
+    mut crust: ResMut<Crust>,
+    mut state: ResMut<ReliefState>,
+    network: Res<DrainageNetwork>,
+    mut flux: ResMut<SurfaceFlux>,
+    mut gpu: Option<ResMut<GpuContext>>,
+) {
+    let n = mesh.len();
+    if !network.built || network.drainage.receiver.len() != n || flux.eroded_km.len() != n {
+        return;
+    }
+    if !pull(&mut crust, &mut gpu, FieldMask::ALL) {
+        return;
+    }
+    let iso = isostasy_params(&params);
+    let sp = sediment_params(&params);
+    let state = &mut *state;
+    let flux = &mut *flux;
+    let crust = &mut *crust;
+    // Surface rise per km deposited: oceanic crust is compensated locally (the sea floor follows
+    // the age–depth law), continental crust regionally, so a single sample stands nearly
+    // uncompensated in the step it receives its load (it sinks by the next steps' isostasy).
+    state.fill.resize(n, 1.0);
+    let gain = iso.sediment_gain() as f32;
+    state
+        .fill
+        .par_iter_mut()
+        .zip(crust.crust_type.par_iter())
+        .with_min_len(8192)
+        .for_each(|(f, &t)| {
+            *f = if t == CrustType::Oceanic { gain } else { 1.0 };
+        });
+    flux.deposit_km.resize(n, 0.0);
+    let Some(g) = state.graph.as_ref() else {
+        return;
+    };
+    flux.sediment = state.router.route(
+        g,
+        &network.drainage,
+        &crust.elevation_km,
+        &flux.eroded_km,
+        Some(&flux.to_ocean_km3),
+        Some(&state.fill),
+        &sp,
+        &mut flux.deposit_km,
+    );
+    crust
+        .thickness_km
+        .par_iter_mut()
+        .zip(flux.deposit_km.par_iter())
+        .with_min_len(8192)
+        .for_each(|(t, &d)| *t += d);
+    flux.total_deposited_km3 += flux.sediment.deposited_km3;
+}
+
+/// Trench depth (km below the floor beside it) of a subducting ocean sample whose distance to
+/// its front is `d_km` (negative once it passed under): `depth·(1 − d/w)²` within `w` of the
+/// front, the full depth past it.
+pub fn trench_profile_km(d_km: f64, depth_km: f64, width_km: f64) -> f64 {
+    if d_km >= width_km {
+        0.0
+    } else if d_km <= 0.0 {
+        depth_km
+    } else {
+        let x = 1.0 - d_km / width_km;
+        depth_km * x * x
+    }
+}
+
+/// The elevation of every sample from the crust (phenomenon `isostasy`): continents by regional
+/// Airy isostasy from their thickness, ocean floor by its age, its load and the flexure of
+/// neighbouring continents, and a trench in front of each active subduction front.
+#[allow(clippy::too_many_arguments)]
+pub fn apply_isostasy(
+    params: Res<Params>,
+    mesh: Res<SphereMesh>,
+    mut crust: ResMut<Crust>,
+    mut state: ResMut<ReliefState>,
+    fp: Res<FrontPoints>,
+    field: Res<ConvergenceField>,
+    mut gpu: Option<ResMut<GpuContext>>,
+) {
+    if !pull(&mut crust, &mut gpu, FieldMask::ALL) {
+        return;
+    }
+    let n = mesh.len();
+    let state = &mut *state;
+    let crust = &mut *crust;
+    let iso = isostasy_params(&params);
+    let ip = &params.isostasy;
+    if ensure_graph(&mut state.graph, &mesh) {
+        state.iso_key = None;
+    }
+    let Some(g) = state.graph.as_ref() else {
+        return;
+    };
+    // The regional levels depend on the mesh and on T_e (through σ).
+    let key = (n, iso.regional_sigma_km().to_bits());
+    if state.iso_key != Some(key) {
+        state.iso = RegionalIsostasy::with_coarse_level(&mesh.positions, g, &iso);
+        state.iso_key = Some(key);
+    }
+    let law = if ip.parsons_sclater {
+        AgeDepthLaw::ParsonsSclater
+    } else {
+        AgeDepthLaw::Gdh1
+    };
+    let offset = ip.ridge_depth_offset_km;
+    if state
+        .table
+        .as_ref()
+        .is_none_or(|(ps, o, _)| *ps != ip.parsons_sclater || *o != offset.to_bits())
+    {
+        state.table = Some((
+            ip.parsons_sclater,
+            offset.to_bits(),
+            AgeDepthTable::new(law, offset),
+        ));
+    }
+    state.oceanic.clear();
+    state
+        .oceanic
+        .extend(crust.crust_type.iter().map(|&t| t == CrustType::Oceanic));
+    state.continental.clear();
+    state.continental.extend(state.oceanic.iter().map(|&o| !o));
+    state.iso.continental_elevation(
+        g,
+        &crust.thickness_km,
+        &state.continental,
+        &iso,
+        &mut crust.elevation_km,
+    );
+    // Trench depth per sample, from the current fronts.
+    state.trench_km.clear();
+    state.trench_km.resize(n, 0.0);
+    if field.subducting_point.len() == n && !fp.is_empty() {
+        let (depth, width) = (ip.trench_depth_km, ip.trench_width_km);
+        state
+            .trench_km
+            .par_iter_mut()
+            .zip(field.subducting_point.par_iter())
+            .zip(field.subducting_distance_km.par_iter())
+            .zip(crust.crust_type.par_iter())
+            .with_min_len(8192)
+            .for_each(|(((t, &sp), &sd), &ct)| {
+                if sp != NONE && ct == CrustType::Oceanic && fp.active[sp as usize] {
+                    let d = sd as f64 - fp.converged_km[sp as usize] as f64;
+                    *t = trench_profile_km(d, depth, width) as f32;
+                }
+            });
+    }
+    let Some((_, _, table)) = state.table.as_ref() else {
+        return;
+    };
+    let w = state.iso.deflection_km();
+    let support = ip.max_flexural_support_km;
+    let t_oc = params.init.oceanic_thickness_km;
+    let gain = iso.sediment_gain();
+    let trench = &state.trench_km;
+    crust
+        .elevation_km
+        .par_iter_mut()
+        .enumerate()
+        .with_min_len(8192)
+        .for_each(|(i, z)| {
+            if state.oceanic[i] {
+                let excess = crust.thickness_km[i] as f64 - t_oc;
+                let wi = (w.get(i).copied().unwrap_or(0.0) as f64).clamp(-support, support);
+                *z = (-table.depth_km(crust.age_my[i] as f64) + gain * excess
+                    - wi
+                    - trench[i] as f64) as f32;
+            }
+        });
+}

@@ -1,0 +1,671 @@
+//! Sediment routing and deposition: everything eroded on land travels down the drainage
+//! network, fills lakes on the way (they fill and overflow), and is laid down offshore as a
+//! shelf–slope–rise wedge, filling trenches and basins. Volume is conserved exactly: every km³
+//! that enters is deposited somewhere in the same call (see [`SedimentBudget`]).
+//!
+//! Land: fluxes Q_i (km³) accumulate in reverse stack order (upstream first), Q_i = e_i·a_i +
+//! Σ Q_donors. A lake sample keeps up to (water level − surface)·a_i / f_i (f_i = surface rise
+//! per unit of deposited thickness, 1 before isostasy, ≈ 0.35 on oceanic crust after it) and
+//! passes the rest on; an endorheic sink keeps everything. Rivers hand their load to the ocean
+//! sample they end in.
+//!
+//! Ocean: a rule-based, single-pass stand-in for marine transport (nonlinear marine diffusion
+//! as in Rivenæs 1992 or goSPL is too slow and too grid-bound at 35–80 km). Ocean samples that
+//! receive sediment are visited from the shallowest down (a max-heap on the surface before
+//! deposition, so a sample is visited after everything that feeds it). Each keeps sediment up
+//! to a ceiling and passes the rest to its lower ocean neighbours in proportion to the slope
+//! (multiple flow direction), carrying the along-path distance D from the coast:
+//!
+//! ```text
+//!   ceiling = min( shelf_top(D),                                   shelf top (0.1° to −130 m,
+//!                                                                    then 1/4 of that)
+//!                  min_lower_j ( z_j + g(z_j)·d_ij ) )            repose against the next sample
+//!   g(z_j) = g_slope (3°) where z_j ≥ −z_slope_base, else g_rise (0.5°)
+//! ```
+//!
+//! so the shelf builds out to a break near −130 m, a ~3° slope forms in front of it, a gentle
+//! rise apron spreads below, and deep depressions (trenches, basins) fill first. Surfaces are
+//! tracked as they fill (z + f·deposit/a). Sediment that reaches a local minimum of the sea
+//! floor fills it as a pond: a small priority flood grows the pond from the minimum, raising
+//! its level sample by sample, until the sediment runs out or the pond reaches a lower
+//! outlet, where the rest carries on downhill (fill-and-spill, as lakes on land). Geometry after Kearey, Klepeis & Vine (2009) and Pratson et al. (2007) for
+//! shelf/slope/rise gradients; shelf-break depth ~130 m (Harris et al. 2014, "Geomorphology of
+//! the oceans", Mar. Geol. 352).
+//!
+//! Deterministic: the land pass is sequential in stack order; the ocean pass pops samples in a
+//! fixed (elevation, index) order.
+
+use std::collections::BinaryHeap;
+
+use super::drainage::Drainage;
+use super::graph::ReliefGraph;
+
+/// Parameters of the marine deposition profile. Depths are positive km below sea level.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SedimentParams {
+    /// Water depth of the shelf surface at the shoreline, km.
+    pub coast_depth_km: f64,
+    /// Shelf gradient, m/m (0.1° ≈ 0.0017).
+    pub shelf_gradient: f64,
+    /// Depth of the shelf break, km (≈ 0.13).
+    pub shelf_break_depth_km: f64,
+    /// Gradient of the shelf top beyond the break depth, m/m (keeps wide shelves from being
+    /// dead flat so sediment keeps a seaward path; 0.0004 = 40 m per 100 km).
+    pub outer_shelf_gradient: f64,
+    /// Continental-slope gradient, m/m (3° ≈ 0.052).
+    pub slope_gradient: f64,
+    /// Depth of the foot of the continental slope, where the rise begins, km.
+    pub slope_base_depth_km: f64,
+    /// Continental-rise gradient, m/m (0.5° ≈ 0.0087).
+    pub rise_gradient: f64,
+    /// Split the flux leaving a sample that keeps some sediment among its lower neighbours at
+    /// least half as steep as the steepest (fans); `false`: steepest neighbour only (cheaper:
+    /// about half the visits).
+    pub marine_mfd: bool,
+    /// A flux that would make a layer thinner than this over the sample it reaches (km) is
+    /// deposited there instead of being passed on (5 m per step: pelagic rates are 1–10 m/My).
+    pub min_pass_thickness_km: f64,
+}
+
+impl Default for SedimentParams {
+    fn default() -> Self {
+        Self {
+            coast_depth_km: 0.01,
+            shelf_gradient: 0.0017,
+            shelf_break_depth_km: 0.13,
+            outer_shelf_gradient: 0.0004,
+            slope_gradient: 0.052,
+            slope_base_depth_km: 2.5,
+            rise_gradient: 0.0087,
+            min_pass_thickness_km: 5e-3,
+            marine_mfd: true,
+        }
+    }
+}
+
+impl SedimentParams {
+    /// Shelf-top elevation (km, negative) at along-path distance `d_km` from the coast:
+    /// −(z_coast + g_shelf·D) down to the break depth, then deepening at the outer gradient.
+    pub fn shelf_top_km(&self, d_km: f64) -> f64 {
+        let brk = self.shelf_break_depth_km.max(self.coast_depth_km);
+        let inner = self.coast_depth_km + self.shelf_gradient * d_km;
+        if inner <= brk || self.shelf_gradient <= 0.0 {
+            -inner.min(brk)
+        } else {
+            let d_break = (brk - self.coast_depth_km) / self.shelf_gradient;
+            -(brk + self.outer_shelf_gradient * (d_km - d_break))
+        }
+    }
+}
+
+/// Volumes handled by one [`SedimentRouter::route`] call, km³.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SedimentBudget {
+    /// Sediment that entered: Σ e_i·a_i + Σ marine input.
+    pub input_km3: f64,
+    /// Σ deposit_i·a_i as written (f32 thicknesses × areas).
+    pub deposited_km3: f64,
+    /// Part kept in lakes and endorheic sinks.
+    pub lakes_km3: f64,
+    /// Part that reached the ocean.
+    pub to_ocean_km3: f64,
+    /// Part spread around local minima of the sea floor (excess after filling them).
+    pub spread_at_minima_km3: f64,
+    /// Ocean samples visited.
+    pub ocean_samples_visited: usize,
+}
+
+impl SedimentBudget {
+    /// |deposited − input| / input (0 when nothing moved).
+    pub fn relative_error(&self) -> f64 {
+        if self.input_km3 > 0.0 {
+            (self.deposited_km3 - self.input_km3).abs() / self.input_km3
+        } else {
+            self.deposited_km3.abs()
+        }
+    }
+}
+
+/// Scratch and state for sediment routing; reuse across steps.
+#[derive(Clone, Debug, Default)]
+pub struct SedimentRouter {
+    flux: Vec<f64>,
+    dep: Vec<f64>,
+    dist: Vec<f32>,
+    /// 0 untouched, 1 queued, 2 processed.
+    state: Vec<u8>,
+    visits: Vec<u8>,
+    touched: Vec<u32>,
+    heap: BinaryHeap<u64>,
+    lower: Vec<(u32, f64, f64)>,
+    pond: Vec<u32>,
+    pond_mark: Vec<u32>,
+    pond_epoch: u32,
+    pond_heap: BinaryHeap<std::cmp::Reverse<u64>>,
+    shares: Vec<(usize, f64)>,
+}
+
+#[inline]
+fn order_bits(x: f32) -> u32 {
+    let b = x.to_bits();
+    if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
+}
+
+/// Most samples one pond may grow to before the rest is laid on it regardless (a thin blanket
+/// over a flat plain; bounds the cost of one pond).
+const MAX_POND: usize = 256;
+/// Times one ocean sample may be processed in one call before its flux is laid on it.
+const MAX_VISITS: u8 = 8;
+/// Layers thinner than this (km) that stay within this distance of the shelf top are laid
+/// down without looking at the neighbours.
+const FAST_PATH_KM: f64 = 0.01;
+/// Level differences below this (km) count as flat.
+const TOL_KM: f64 = 1e-6;
+
+impl SedimentRouter {
+    /// New router; buffers grow on first use.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    #[inline]
+    fn touch(&mut self, i: usize) {
+        if self.state[i] == 0 && self.flux[i] == 0.0 && self.dep[i] == 0.0 {
+            self.touched.push(i as u32);
+        }
+    }
+
+    /// Routes the eroded material and writes deposited thickness (km, ≥ 0) to `deposit_km`.
+    ///
+    /// - `elevation_km`: surface after erosion (km, sea level 0); the network `drainage` was
+    ///   computed before erosion on the same mask.
+    /// - `eroded_km`: thickness removed per sample (km, ≥ 0; e.g. stream power plus the
+    ///   lowering from diffusion).
+    /// - `marine_input_km3`: extra volume delivered straight to ocean samples (e.g. the coastal
+    ///   outflow of [`super::diffusion::diffuse_land`]).
+    /// - `fill_factor`: surface rise per unit deposited thickness per sample (0 < f ≤ 1;
+    ///   missing = 1). Passing the isostatic factor of a *local* compensation (oceanic crust:
+    ///   (ρ_m − ρ_s)/(ρ_m − ρ_w)) makes one step fill to the equilibrium profile; under regional
+    ///   isostasy a single sample is barely compensated, so use 1 there.
+    #[allow(clippy::too_many_arguments)]
+    pub fn route(
+        &mut self,
+        g: &ReliefGraph,
+        drainage: &Drainage,
+        elevation_km: &[f32],
+        eroded_km: &[f32],
+        marine_input_km3: Option<&[f64]>,
+        fill_factor: Option<&[f32]>,
+        p: &SedimentParams,
+        deposit_km: &mut [f32],
+    ) -> SedimentBudget {
+        let n = g.len();
+        deposit_km.iter_mut().for_each(|d| *d = 0.0);
+        let mut b = SedimentBudget::default();
+        if elevation_km.len() < n
+            || eroded_km.len() < n
+            || deposit_km.len() < n
+            || drainage.receiver.len() < n
+            || drainage.ocean.len() < n
+        {
+            return b;
+        }
+        self.flux.resize(n, 0.0);
+        self.dep.resize(n, 0.0);
+        self.dist.resize(n, f32::INFINITY);
+        self.state.resize(n, 0);
+        self.visits.resize(n, 0);
+        self.pond_mark.resize(n, 0);
+        self.touched.clear();
+        self.heap.clear();
+        let ocean = &drainage.ocean;
+        let ff = |i: usize| -> f64 {
+            fill_factor
+                .and_then(|f| f.get(i).copied())
+                .filter(|f| f.is_finite() && *f > 0.0)
+                .map(|f| (f as f64).min(1.0))
+                .unwrap_or(1.0)
+        };
+        let z_of = |i: usize| -> f64 {
+            let z = elevation_km[i];
+            if z.is_finite() { z as f64 } else { 0.0 }
+        };
+
+        // Land: accumulate and route down the network, filling lakes. Land fluxes are zeroed as
+        // the samples are visited, so only samples that keep a deposit are listed in `touched`.
+        for i in 0..n {
+            let e = eroded_km[i];
+            if e.is_finite() && e > 0.0 && !ocean[i] {
+                let v = e as f64 * g.area_km2[i];
+                b.input_km3 += v;
+                self.flux[i] += v;
+            }
+        }
+        for k in (0..drainage.stack.len()).rev() {
+            let i = drainage.stack[k] as usize;
+            let mut q = self.flux[i];
+            if q <= 0.0 {
+                continue;
+            }
+            self.flux[i] = 0.0;
+            let r = drainage.receiver[i] as usize;
+            // Lake: fill up to the water level. Endorheic sink: keep everything.
+            let depth = if drainage.is_lake(i) {
+                drainage.water_level_km[i] as f64 - z_of(i)
+            } else {
+                0.0
+            };
+            if depth > 0.0 || r == i {
+                let cap = if r == i {
+                    f64::INFINITY
+                } else {
+                    depth * g.area_km2[i] / ff(i)
+                };
+                let d = q.min(cap);
+                if d > 0.0 {
+                    if self.dep[i] == 0.0 {
+                        self.touched.push(i as u32);
+                    }
+                    self.dep[i] += d;
+                }
+                b.lakes_km3 += d;
+                q -= d;
+            }
+            if q <= 0.0 {
+                continue;
+            }
+            if ocean[r] {
+                b.to_ocean_km3 += q;
+                let d0 = 0.5 * drainage.receiver_km[i];
+                self.send(r, q, d0, elevation_km);
+            } else {
+                self.flux[r] += q;
+            }
+        }
+        // Direct marine input (coastal diffusion outflow).
+        if let Some(mi) = marine_input_km3 {
+            let half = 0.5 * g.mean_spacing_km as f32;
+            for (j, &v) in mi.iter().enumerate().take(n) {
+                if !(v.is_finite() && v > 0.0) || !ocean[j] {
+                    continue;
+                }
+                b.input_km3 += v;
+                b.to_ocean_km3 += v;
+                // Fast path: a thin layer that stays under the shelf top is laid down where it
+                // arrives (the repose limit is checked when the sample is routed later).
+                let a = g.area_km2[j].max(1e-12);
+                let add = ff(j) * v / a;
+                let zj = z_of(j) + ff(j) * self.dep[j] / a;
+                if self.state[j] == 0 && add <= FAST_PATH_KM && zj + add <= p.shelf_top_km(half as f64) + FAST_PATH_KM {
+                    self.touch(j);
+                    self.dep[j] += v;
+                    continue;
+                }
+                self.send(j, v, half, elevation_km);
+            }
+        }
+
+        // Ocean: shallowest (current surface) first.
+        let mut budget_visits = 8 * n + 1000;
+        while let Some(key) = self.heap.pop() {
+            let i = (!(key as u32)) as usize;
+            if self.state[i] != 1 {
+                continue;
+            }
+            self.state[i] = 2;
+            b.ocean_samples_visited += 1;
+            budget_visits = budget_visits.saturating_sub(1);
+            self.visits[i] = self.visits[i].saturating_add(1);
+            let mut q = self.flux[i];
+            self.flux[i] = 0.0;
+            if q <= 0.0 {
+                continue;
+            }
+            let cur = |s: &Self, j: usize| z_of(j) + ff(j) * s.dep[j] / g.area_km2[j].max(1e-12);
+            let zi = cur(self, i);
+            let di = self.dist[i] as f64;
+            let shelf_top = p.shelf_top_km(di);
+            let ai = g.area_km2[i].max(1e-12);
+            if ff(i) * q / ai <= FAST_PATH_KM && zi + ff(i) * q / ai <= shelf_top + FAST_PATH_KM {
+                // Thin layer at most 10 m over the shelf top: laid down here, no neighbour scan
+                // (the shelf top is a soft ceiling; the next step routes past the excess).
+                self.dep[i] += q;
+                continue;
+            }
+            self.lower.clear();
+            let mut repose = f64::INFINITY;
+            for e in g.edges(i) {
+                let j = g.neighbors[e] as usize;
+                let d = g.edge_km[e] as f64;
+                if d <= 0.0 || !ocean[j] {
+                    continue;
+                }
+                let zj = cur(self, j);
+                if zj < zi - TOL_KM {
+                    let grad = if zj >= -p.slope_base_depth_km {
+                        p.slope_gradient
+                    } else {
+                        p.rise_gradient
+                    };
+                    repose = repose.min(zj + grad * d);
+                    self.lower.push((j as u32, (zi - zj) / d, d));
+                }
+            }
+            let ceiling = shelf_top.min(repose);
+            let keep = q.min((ceiling - zi).max(0.0) * g.area_km2[i] / ff(i));
+
+            self.dep[i] += keep;
+            q -= keep;
+            if q <= 0.0 {
+                continue;
+            }
+            if q < p.min_pass_thickness_km * g.area_km2[i] {
+                self.dep[i] += q;
+                continue;
+            }
+            if budget_visits == 0 || self.visits[i] > MAX_VISITS {
+                // Visited often enough: no more fanning out. Everything goes down the steepest
+                // lower neighbour (each hop goes strictly down, so it ends), or stays here at a
+                // local minimum.
+                let steepest = self
+                    .lower
+                    .iter()
+                    .copied()
+                    .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)));
+                match steepest {
+                    Some((j, _, d)) => self.send(j as usize, q, (di + d) as f32, elevation_km),
+                    None => self.dep[i] += q,
+                }
+                continue;
+            }
+            if self.lower.is_empty() {
+                // Local minimum: fill as a pond; the rest spills at the pond's outlet.
+                let (outlet, rest) = self.pond_fill(g, ocean, i, q, p, elevation_km, &ff);
+                b.spread_at_minima_km3 += q - rest;
+                if let Some(o) = outlet {
+                    let d = di as f32 + g.mean_spacing_km as f32;
+                    self.send(o, rest, d, elevation_km);
+                }
+                continue;
+            }
+            // Multiple flow direction, restricted to the lower neighbours at least half as
+            // steep as the steepest (keeps fans from spreading sediment over every direction).
+            // A full sample (nothing kept) passes everything down its steepest path: sediment
+            // bypassing a full shelf or slope travels in channels rather than fanning out.
+            let smax = self.lower.iter().map(|l| l.1).fold(0.0, f64::max);
+            let mfd = keep > 0.0 && p.marine_mfd;
+            let cut = if mfd { 0.5 * smax } else { smax };
+            self.lower.retain(|l| l.1 >= cut);
+            self.lower.truncate(if mfd { usize::MAX } else { 1 });
+            let total: f64 = self.lower.iter().map(|l| l.1).sum();
+            let count = self.lower.len();
+            let mut given = 0.0;
+            for k in 0..count {
+                let (j, s, d) = self.lower[k];
+                let v = if k + 1 == count { q - given } else { q * s / total };
+                given += v;
+                self.send(j as usize, v, (di + d) as f32, elevation_km);
+            }
+        }
+
+        // Safety net: no ocean sample may be raised above the shelf surface at the coast
+        // (−coast depth). The visit and pond limits above can leave more than that on one
+        // sample (a trench or a basin fed by many rivers); the excess spreads to the nearest
+        // ocean samples with room, breadth first, in a fixed order.
+        self.spread_overfull(g, ocean, p, elevation_km, &ff);
+
+        // Write out and reset scratch (a sample listed twice is written once: dep is cleared).
+        for k in 0..self.touched.len() {
+            let i = self.touched[k] as usize;
+            let a = g.area_km2[i];
+            if a > 0.0 && self.dep[i] > 0.0 {
+                let t = (self.dep[i] / a) as f32;
+                deposit_km[i] += t;
+                b.deposited_km3 += t as f64 * a;
+            }
+            self.flux[i] = 0.0;
+            self.dep[i] = 0.0;
+            self.dist[i] = f32::INFINITY;
+            self.state[i] = 0;
+            self.visits[i] = 0;
+        }
+        b
+    }
+
+    /// Moves whatever would raise an ocean sample above `−coast_depth` to the nearest ocean
+    /// samples with room (breadth first from it, neighbours in CSR order; overfull samples in
+    /// the order they were touched). Conserves the volume; a remainder no ocean sample within
+    /// reach can take stays where it was.
+    fn spread_overfull(
+        &mut self,
+        g: &ReliefGraph,
+        ocean: &[bool],
+        p: &SedimentParams,
+        elevation_km: &[f32],
+        ff: &dyn Fn(usize) -> f64,
+    ) {
+        let cap_level = -p.coast_depth_km;
+        let room = |dep: &[f64], j: usize| -> f64 {
+            let z = elevation_km[j];
+            let z = if z.is_finite() { z as f64 } else { 0.0 };
+            ((cap_level - z) * g.area_km2[j] / ff(j) - dep[j]).max(0.0)
+        };
+        let mut queue: Vec<u32> = Vec::new();
+        let n_touched = self.touched.len();
+        for k in 0..n_touched {
+            let i = self.touched[k] as usize;
+            if !ocean[i] || self.dep[i] <= 0.0 {
+                continue;
+            }
+            let z = elevation_km[i];
+            let z = if z.is_finite() { z as f64 } else { 0.0 };
+            let cap = ((cap_level - z) * g.area_km2[i] / ff(i)).max(0.0);
+            let mut excess = self.dep[i] - cap;
+            if excess <= 1e-9 * g.area_km2[i] {
+                continue;
+            }
+            self.dep[i] = cap;
+            // Breadth-first search over ocean samples; `pond_mark` with a fresh epoch marks
+            // the visited ones.
+            self.pond_epoch = self.pond_epoch.wrapping_add(2);
+            if self.pond_epoch < 2 {
+                self.pond_mark.iter_mut().for_each(|m| *m = 0);
+                self.pond_epoch = 2;
+            }
+            let seen = self.pond_epoch;
+            queue.clear();
+            queue.push(i as u32);
+            self.pond_mark[i] = seen;
+            let mut head = 0;
+            while head < queue.len() && excess > 0.0 && head < 100_000 {
+                let u = queue[head] as usize;
+                head += 1;
+                for e in g.edges(u) {
+                    let j = g.neighbors[e] as usize;
+                    if j == u || !ocean[j] || self.pond_mark[j] == seen {
+                        continue;
+                    }
+                    self.pond_mark[j] = seen;
+                    queue.push(j as u32);
+                    let r = room(&self.dep, j);
+                    if r > 0.0 {
+                        let v = r.min(excess);
+                        self.touch(j);
+                        self.dep[j] += v;
+                        excess -= v;
+                        if excess <= 0.0 {
+                            break;
+                        }
+                    }
+                }
+            }
+            if excess > 0.0 {
+                // A sea full to the brim all round (walled in by land): a blanket over the
+                // whole of it, in proportion to area.
+                let total: f64 = queue.iter().map(|&j| g.area_km2[j as usize]).sum();
+                if total > 0.0 {
+                    let mut given = 0.0;
+                    let last = queue.len() - 1;
+                    for k in 0..queue.len() {
+                        let j = queue[k] as usize;
+                        let v = if k == last {
+                            excess - given
+                        } else {
+                            excess * g.area_km2[j] / total
+                        };
+                        given += v;
+                        self.touch(j);
+                        self.dep[j] += v;
+                    }
+                } else {
+                    self.dep[i] += excess;
+                }
+            }
+        }
+    }
+
+    /// Adds flux `q` to ocean sample `j` (distance from the coast `d`) and queues it at its
+    /// current surface.
+    fn send(&mut self, j: usize, q: f64, d: f32, elevation_km: &[f32]) {
+        self.touch(j);
+        self.flux[j] += q;
+        if d < self.dist[j] {
+            self.dist[j] = d;
+        }
+        if self.state[j] != 1 {
+            self.state[j] = 1;
+            let z = elevation_km[j];
+            let z = if z.is_finite() { z } else { 0.0 };
+            self.heap
+                .push(((order_bits(z) as u64) << 32) | (!(j as u32)) as u64);
+        }
+    }
+
+    /// Grows a pond from local minimum `i` with `q` km³: returns the outlet (a sample lower than
+    /// the pond level next to it) and the volume left for it, or `None` when all was stored.
+    #[allow(clippy::too_many_arguments)]
+    fn pond_fill(
+        &mut self,
+        g: &ReliefGraph,
+        ocean: &[bool],
+        i: usize,
+        mut q: f64,
+        p: &SedimentParams,
+        elevation_km: &[f32],
+        ff: &dyn Fn(usize) -> f64,
+    ) -> (Option<usize>, f64) {
+        let ocean_cap = -p.coast_depth_km;
+        self.pond_epoch = self.pond_epoch.wrapping_add(2);
+        if self.pond_epoch < 2 {
+            self.pond_mark.iter_mut().for_each(|m| *m = 0);
+            self.pond_epoch = 2;
+        }
+        let (in_pond, in_heap) = (self.pond_epoch, self.pond_epoch + 1);
+        let cur = |dep: &[f64], j: usize| -> f64 {
+            let z = elevation_km[j];
+            let z = if z.is_finite() { z as f64 } else { 0.0 };
+            z + ff(j) * dep[j] / g.area_km2[j].max(1e-12)
+        };
+        self.pond.clear();
+        self.pond_heap.clear();
+        self.pond.push(i as u32);
+        self.pond_mark[i] = in_pond;
+        let mut level = cur(&self.dep, i);
+        let mut inv = g.area_km2[i] / ff(i); // km³ per km of level rise
+        let q0 = q;
+        let mut outlet = None;
+        let mut barrier: Option<(f64, usize)> = None;
+        loop {
+            if self.pond.len() >= MAX_POND {
+                break;
+            }
+            // Neighbours of the newest pond sample enter the boundary.
+            let newest = *self.pond.last().unwrap_or(&(i as u32)) as usize;
+            for e in g.edges(newest) {
+                let k = g.neighbors[e] as usize;
+                if k == newest
+                    || !ocean[k]
+                    || self.pond_mark[k] == in_pond
+                    || self.pond_mark[k] == in_heap
+                {
+                    continue;
+                }
+                self.pond_mark[k] = in_heap;
+                let c = cur(&self.dep, k) as f32;
+                self.pond_heap
+                    .push(std::cmp::Reverse(((order_bits(c) as u64) << 32) | k as u64));
+            }
+            let Some(std::cmp::Reverse(key)) = self.pond_heap.pop() else {
+                break;
+            };
+            let bnd = (key & 0xffff_ffff) as usize;
+            let cb = cur(&self.dep, bnd);
+            if cb < level - TOL_KM {
+                outlet = Some(bnd);
+                break;
+            }
+            if cb >= ocean_cap {
+                // Already filled to (nearly) sea level: a barrier the pond cannot rise over.
+                // Raise the pond to the cap and look for another outlet; remember the lowest
+                // barrier, over which the rest spills if no outlet is found.
+                if barrier.is_none_or(|(z, _)| cb < z) {
+                    barrier = Some((cb, bnd));
+                }
+                continue;
+            }
+            if cb > level {
+                let need = (cb - level) * inv;
+                if q <= need {
+                    level += q / inv;
+                    q = 0.0;
+                    break;
+                }
+                q -= need;
+                level = cb;
+            }
+            self.pond.push(bnd as u32);
+            self.pond_mark[bnd] = in_pond;
+            inv += g.area_km2[bnd] / ff(bnd);
+        }
+        if outlet.is_none() && q > 0.0 {
+            // No outlet within reach (a wide flat plain, or a sea walled in by full shelves):
+            // fill the pond up to the shelf surface at the coast and spill the rest over the
+            // lowest barrier; with no barrier either, lay it on the pond as a blanket.
+            let room = ((ocean_cap - level) * inv).max(0.0);
+            match barrier {
+                Some((_, b)) if q > room => {
+                    level = level.max(ocean_cap);
+                    q -= room;
+                    outlet = Some(b);
+                }
+                _ => {
+                    level += q / inv;
+                    q = 0.0;
+                }
+            }
+        }
+        // Lay the used volume on the pond, proportionally to each sample's share.
+        let used = q0 - q;
+        let mut shares = std::mem::take(&mut self.shares);
+        shares.clear();
+        shares.extend(self.pond.iter().map(|&j| {
+            let j = j as usize;
+            (j, (level - cur(&self.dep, j)).max(0.0) * g.area_km2[j] / ff(j))
+        }));
+        let wsum: f64 = shares.iter().map(|s| s.1).sum();
+        if wsum > 0.0 && used > 0.0 {
+            let mut given = 0.0;
+            let last = shares.len() - 1;
+            for (k, &(j, w)) in shares.iter().enumerate() {
+                let v = if k == last { used - given } else { used * w / wsum };
+                given += v;
+                self.touch(j);
+                self.dep[j] += v;
+            }
+        } else if used > 0.0 {
+            self.dep[i] += used;
+        }
+        self.shares = shares;
+        (outlet, q)
+    }
+}

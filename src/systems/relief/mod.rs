@@ -282,6 +282,7 @@ pub fn erode_rivers(
     if k_den > 0.0 {
         let ocean = &network.drainage.ocean;
         let factor = (1.0 - (-k_den * dt).exp()) as f32;
+        let den_cap: f32 = std::env::var("DENCAP").ok().and_then(|v| v.parse().ok()).unwrap_or(1e9);
         let area = &g.area_km2;
         let extra: f64 = crust
             .elevation_km
@@ -293,7 +294,7 @@ pub fn erode_rivers(
                 if ocean.get(i).copied().unwrap_or(true) || *z <= 0.0 {
                     return 0.0;
                 }
-                let d = *z * factor;
+                let d = z.min(den_cap) * factor;
                 *z -= d;
                 *e += d;
                 d as f64 * area[i]
@@ -483,6 +484,7 @@ pub fn apply_isostasy(
     };
     let w = state.iso.deflection_km();
     let support = ip.max_flexural_support_km;
+    let moat: f64 = std::env::var("MOAT").ok().and_then(|v| v.parse().ok()).unwrap_or(1.0);
     let t_oc = params.init.oceanic_thickness_km;
     let gain = iso.sediment_gain();
     let trench = &state.trench_km;
@@ -494,7 +496,7 @@ pub fn apply_isostasy(
         .for_each(|(i, z)| {
             if state.oceanic[i] {
                 let excess = crust.thickness_km[i] as f64 - t_oc;
-                let wi = (w.get(i).copied().unwrap_or(0.0) as f64).clamp(-support, support);
+                let wi = moat * (w.get(i).copied().unwrap_or(0.0) as f64).clamp(-support, support);
                 *z = (-table.depth_km(crust.age_my[i] as f64) + gain * excess
                     - wi
                     - trench[i] as f64) as f32;

@@ -270,7 +270,7 @@ define_params! {
         parsons_sclater: bool = false, false..=true, "", "Ocean depth by Parsons & Sclater 1977 (2.5 + 0.35·√t, then 6.4 − 3.2·e^(−t/62.8)) instead of GDH1 (Stein & Stein 1992: 2.6 + 0.365·√t, then 5.651 − 2.473·e^(−0.0278·t)).";
         ridge_depth_offset_km: f64 = 0.2, -3.0..=3.0, "km", "Added to the age–depth law's depth: 0.2 puts the ridge axis near the observed −2.8 km (DESIGN §7).";
         trench_depth_km: f64 = 3.5, 0.0..=15.0, "km", "Depth of a trench below the sea floor beside it, at the subduction front (observed 3–4 km, DESIGN §7).";
-        trench_width_km: f64 = 150.0, 1.0..=2000.0, "km", "Distance from the front over which the trench shallows to the sea floor (profile (1 − d/w)²: about 90 km wide at half depth).";
+        trench_width_km: f64 = 80.0, 1.0..=2000.0, "km", "Distance from the front over which the trench shallows to the sea floor on either side (profile (1 − |d|/w)²: about 50 km wide at half depth; observed trenches are 40–120 km wide, DESIGN §7).";
         max_thickness_km: f64 = 90.0, 10.0..=300.0, "km", "Subduction and collisions never thicken continental crust beyond this (about 8.6 km of elevation at the defaults).";
         max_oceanic_thickness_km: f64 = 30.0, 1.0..=300.0, "km", "Subduction never thickens oceanic crust (island arcs) beyond this (about +3 km on old sea floor at the defaults; real arcs have 20–35 km of crust).";
     }
@@ -283,7 +283,8 @@ define_params! {
         reference_spacing_km: f64 = 50.0, 1.0..=1000.0, "km", "Drainage areas are scaled by (this / mean sample spacing), so relief does not depend on the resolution (a width-normalised area).";
         hillslope_diffusivity_km2_per_my: f64 = 30.0, 0.0..=100000.0, "km²/My", "Diffusivity κ of the land surface (landscape scale; Culling 1960).";
         min_sea_area_km2: f64 = 250000.0, 0.0..=1e9, "km²", "A body of water below sea level smaller than this, or without oceanic crust, is a lake: it fills with sediment and overflows toward the sea instead of taking the sediment of the land around it (the Caspian is 370,000 km²).";
-        denudation_per_my: f64 = 0.02, 0.0..=10.0, "1/My", "Background denudation: land loses this fraction of its height above sea level per My (weathering and transport below the resolution of the network, which stream power with its threshold leaves out), carried down the network as sediment. 0.02/My is 0.02 mm/yr at 1 km, the rate of old orogens and cratons (Portenga & Bierman 2011); with isostatic rebound, relief left alone then decays over about 300 My.";
+        denudation_per_my: f64 = 0.05, 0.0..=10.0, "1/My", "Background denudation: land loses this fraction of its height above sea level per My, up to denudation_cap_km (weathering and transport below the resolution of the network, which stream power with its threshold leaves out), carried down the network as sediment. 0.05/My is 0.05 mm/yr at 1 km, within the rates of old orogens and cratons (0.01–0.1 mm/yr, Portenga & Bierman 2011); with isostatic rebound, a plain left alone sinks toward sea level over about 130 My.";
+        denudation_cap_km: f64 = 1.0, 0.0..=20.0, "km", "Background denudation grows with height up to this elevation and no further: ranges are worn by rivers (stream power), lowlands by denudation.";
     }
     /// Sediment: what rivers carry is laid down in lakes, on shelves, slopes and rises, and in
     /// trenches and basins.
@@ -295,6 +296,8 @@ define_params! {
         slope_gradient: f64 = 0.052, 0.001..=1.0, "m/m", "Gradient of the continental slope (3°, DESIGN §7).";
         slope_base_depth_km: f64 = 2.5, 0.1..=10.0, "km", "Depth of the foot of the continental slope, where the rise begins.";
         rise_gradient: f64 = 0.0087, 0.0..=1.0, "m/m", "Gradient of the continental rise (0.5°).";
+        pelagic_rate_m_per_my: f64 = 10.0, 0.0..=1000.0, "m/My", "Pelagic sediment (plankton shells, dust) settling on the sea floor, which raises it by (ρ_m − ρ_s)/(ρ_m − ρ_w) of the layer (typical 1–10 m/My, more above the carbonate compensation depth).";
+        pelagic_max_age_my: f64 = 150.0, 0.0..=10000.0, "My", "Pelagic sediment settles on sea floor younger than this (old floor lies below the carbonate compensation depth, where little settles), which bounds the layer to rate × age.";
     }
     /// Plate rifting.
     [rifting] Rifting {

@@ -132,6 +132,8 @@ pub struct SurfaceFlux {
     pub diffusion: DiffusionBudget,
     /// Sediment volumes.
     pub sediment: SedimentBudget,
+    /// Pelagic sediment laid on the sea floor this step, km³ (from the sea, not the land).
+    pub pelagic_km3: f64,
     /// Summed over the run: eroded and deposited volumes, km³.
     pub total_eroded_km3: f64,
     /// See `total_eroded_km3`.
@@ -277,12 +279,13 @@ pub fn erode_rivers(
         dt,
         &mut state.spl,
     );
-    // Background denudation: land loses k·z per My, added to the rock the rivers carry.
+    // Background denudation: land loses k·min(z, cap) per My, added to the rock the rivers
+    // carry.
     let k_den = params.rivers.denudation_per_my;
     if k_den > 0.0 {
         let ocean = &network.drainage.ocean;
         let factor = (1.0 - (-k_den * dt).exp()) as f32;
-        let den_cap: f32 = std::env::var("DENCAP").ok().and_then(|v| v.parse().ok()).unwrap_or(1e9);
+        let den_cap = params.rivers.denudation_cap_km as f32;
         let area = &g.area_km2;
         let extra: f64 = crust
             .elevation_km
@@ -381,20 +384,41 @@ pub fn deposit_sediment(
         .with_min_len(8192)
         .for_each(|(t, &d)| *t += d);
     flux.total_deposited_km3 += flux.sediment.deposited_km3;
+    // Pelagic rain (plankton shells, dust): sea floor younger than the age cap gains
+    // `sediment.pelagic_rate_m_per_my`; it comes from the sea, not the land, so it is counted
+    // apart from the eroded-deposited balance.
+    let rate_km = params.sediment.pelagic_rate_m_per_my * 1e-3 * params.time.time_step_my;
+    let max_age = params.sediment.pelagic_max_age_my as f32;
+    if rate_km > 0.0 {
+        let ocean = &network.drainage.ocean;
+        let added: Vec<f64> = crust
+            .thickness_km
+            .par_iter_mut()
+            .enumerate()
+            .with_min_len(8192)
+            .map(|(i, t)| {
+                if state.oceanic[i] && ocean[i] && crust.age_my[i] < max_age {
+                    *t += rate_km as f32;
+                    rate_km * g.area_km2[i]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        flux.pelagic_km3 = added.iter().sum();
+    } else {
+        flux.pelagic_km3 = 0.0;
+    }
 }
 
 /// Trench depth (km below the floor beside it) of a subducting ocean sample whose distance to
-/// its front is `d_km` (negative once it passed under): `depth·(1 − d/w)²` within `w` of the
-/// front, the full depth past it.
+/// its front is `d_km` (negative once it passed under): `depth·(1 − |d|/w)²` within `w` of the
+/// front, deepest at the front. Past the front the sample lies under the overriding plate; the
+/// profile falls off the same way, so floor that went far under (and still shows where the
+/// overriding plate does not cover it) is not kept at the trench's depth.
 pub fn trench_profile_km(d_km: f64, depth_km: f64, width_km: f64) -> f64 {
-    if d_km >= width_km {
-        0.0
-    } else if d_km <= 0.0 {
-        depth_km
-    } else {
-        let x = 1.0 - d_km / width_km;
-        depth_km * x * x
-    }
+    let x = 1.0 - d_km.abs() / width_km.max(1e-9);
+    if x <= 0.0 { 0.0 } else { depth_km * x * x }
 }
 
 /// The elevation of every sample from the crust (phenomenon `isostasy`): continents by regional
@@ -484,7 +508,6 @@ pub fn apply_isostasy(
     };
     let w = state.iso.deflection_km();
     let support = ip.max_flexural_support_km;
-    let moat: f64 = std::env::var("MOAT").ok().and_then(|v| v.parse().ok()).unwrap_or(1.0);
     let t_oc = params.init.oceanic_thickness_km;
     let gain = iso.sediment_gain();
     let trench = &state.trench_km;
@@ -496,7 +519,7 @@ pub fn apply_isostasy(
         .for_each(|(i, z)| {
             if state.oceanic[i] {
                 let excess = crust.thickness_km[i] as f64 - t_oc;
-                let wi = moat * (w.get(i).copied().unwrap_or(0.0) as f64).clamp(-support, support);
+                let wi = (w.get(i).copied().unwrap_or(0.0) as f64).clamp(-support, support);
                 *z = (-table.depth_km(crust.age_my[i] as f64) + gain * excess
                     - wi
                     - trench[i] as f64) as f32;

@@ -7,5 +7,6 @@ pub mod geotiff;
 pub mod gltf;
 pub mod heightmap;
 pub mod maps;
+pub mod pending;
 pub mod save;
 pub mod summary;

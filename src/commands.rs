@@ -331,6 +331,19 @@ impl Command {
         Ok(())
     }
 
+    /// The command's name as scripts write it (`set_motion`, `rift_at`, ...).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Command::SetMotion { .. } => "set_motion",
+            Command::SetCrustType { .. } => "set_crust_type",
+            Command::RiftLine { .. } => "rift_line",
+            Command::RiftAt { .. } => "rift_at",
+            Command::Uplift { .. } => "uplift",
+            Command::SetPhenomenon { .. } => "set_phenomenon",
+            Command::SetParam { .. } => "set_param",
+        }
+    }
+
     /// The command as one line of JSON (what the history records).
     pub fn to_json(&self) -> String {
         serde_json::to_string(self).unwrap_or_default()
@@ -649,6 +662,14 @@ pub enum ScriptError {
         /// Why.
         source: std::io::Error,
     },
+    /// The file is missing, a folder, too large, not text or unreadable.
+    #[error("script {path} {problem}")]
+    File {
+        /// The file.
+        path: String,
+        /// What is wrong with it.
+        problem: crate::resources::input::TextFileError,
+    },
     /// The file is not a valid script.
     #[error("script {path}: {msg}")]
     Invalid {
@@ -662,6 +683,8 @@ pub enum ScriptError {
 /// One timed event of a script.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ScriptEvent {
+    /// Its position in the file, from 1 (messages name events by it).
+    pub number: usize,
     /// When, My since the start of the run.
     pub at_my: f64,
     /// A free-text note printed when the event fires.
@@ -679,26 +702,43 @@ pub struct Script {
     next: usize,
 }
 
+impl ScriptEvent {
+    /// The event as messages name it: `event 3 (at 190 My, set_phenomenon)`.
+    pub fn label(&self) -> String {
+        format!(
+            "event {} (at {} My, {})",
+            self.number,
+            crate::resources::input::num(self.at_my),
+            self.command.name()
+        )
+    }
+}
+
 impl Script {
-    /// Reads a script file.
+    /// Reads a script file, once and at most
+    /// [`MAX_SCRIPT_BYTES`](crate::resources::input::MAX_SCRIPT_BYTES) of it.
     pub fn load(path: &Path) -> Result<Self, ScriptError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ScriptError::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
+        use crate::resources::input::{MAX_SCRIPT_BYTES, read_text_capped};
+        let text =
+            read_text_capped(path, MAX_SCRIPT_BYTES).map_err(|problem| ScriptError::File {
+                path: path.display().to_string(),
+                problem,
+            })?;
         Self::parse(&text, &path.display().to_string())
     }
 
     /// Parses a script's text (`origin` names it in errors).
     pub fn parse(text: &str, origin: &str) -> Result<Self, ScriptError> {
+        use crate::resources::input::{clip, clip_lines};
         let invalid = |msg: String| ScriptError::Invalid {
             path: origin.to_string(),
-            msg,
+            msg: clip_lines(&msg, 12),
         };
         let mut doc: toml::Table = toml::from_str(text).map_err(|e| invalid(e.to_string()))?;
         if let Some(k) = doc.keys().find(|k| k.as_str() != "event") {
             return Err(invalid(format!(
-                "unknown top-level key `{k}` (a script is a list of [[event]] tables)"
+                "unknown top-level key `{}` (a script is a list of [[event]] tables)",
+                clip(k)
             )));
         }
         let events = match doc.remove("event") {
@@ -713,6 +753,7 @@ impl Script {
         let mut out = Vec::with_capacity(events.len());
         for (i, e) in events.into_iter().enumerate() {
             let which = format!("event {} ", i + 1);
+            let number = i + 1;
             let toml::Value::Table(mut t) = e else {
                 return Err(invalid(format!("{which}is not a table")));
             };
@@ -720,24 +761,37 @@ impl Script {
                 Some(toml::Value::Float(f)) => f,
                 Some(toml::Value::Integer(n)) => n as f64,
                 Some(v) => {
-                    return Err(invalid(format!("{which}: at_my must be a number, got {v}")));
+                    return Err(invalid(format!(
+                        "{which}: at_my must be a number, got {}",
+                        clip(&v.to_string())
+                    )));
                 }
                 None => return Err(invalid(format!("{which}has no at_my"))),
             };
             if !at_my.is_finite() || at_my < 0.0 {
                 return Err(invalid(format!(
-                    "{which}: at_my must be finite and non-negative, got {at_my}"
+                    "{which}: at_my must be finite and non-negative, got {}",
+                    crate::resources::input::num(at_my)
                 )));
             }
             let note = match t.remove("note") {
                 Some(toml::Value::String(s)) => Some(s),
-                Some(v) => return Err(invalid(format!("{which}: note must be a string, got {v}"))),
+                Some(v) => {
+                    return Err(invalid(format!(
+                        "{which}: note must be a string, got {}",
+                        clip(&v.to_string())
+                    )));
+                }
                 None => None,
             };
-            let command: Command = toml::Value::Table(t)
-                .try_into()
-                .map_err(|e| invalid(format!("{which}(at {at_my} My): {e}")))?;
+            let command: Command = toml::Value::Table(t).try_into().map_err(|e| {
+                invalid(format!(
+                    "{which}(at {} My): {e}",
+                    crate::resources::input::num(at_my)
+                ))
+            })?;
             out.push(ScriptEvent {
+                number,
                 at_my,
                 note,
                 command,
@@ -752,12 +806,86 @@ impl Script {
 
     /// Checks every event's values against `params` (before a long run starts).
     pub fn validate(&self, params: &Params) -> Result<(), SimError> {
-        for (i, e) in self.events.iter().enumerate() {
+        for e in &self.events {
             e.command
                 .validate(params)
-                .map_err(|err| bad(format!("script event {} (at {} My): {err}", i + 1, e.at_my)))?;
+                .map_err(|err| bad(format!("script {}: {err}", e.label())))?;
         }
         Ok(())
+    }
+
+    /// Checks every event against the planet it will run on, before the run starts: the
+    /// values ([`Self::validate`]), phenomenon names, plugin parameter keys and values, and
+    /// plate ids that can never exist (an id below the next plate id that names no plate now:
+    /// ids are never reused). Returns notes on what cannot be decided yet: plate ids not made
+    /// so far, which a rift must make before the event.
+    pub fn validate_for(&self, sim: &mut Simulation) -> Result<Vec<String>, SimError> {
+        self.validate(sim.params())?;
+        let phenomena = sim.phenomena();
+        let next_id = sim.world().resource::<crate::resources::NextPlateId>().0;
+        let world = sim.world_mut();
+        let mut ids: Vec<u32> = world
+            .query::<&Plate>()
+            .iter(world)
+            .map(|p| p.id.0)
+            .collect();
+        ids.sort_unstable();
+        let mut notes = Vec::new();
+        for e in &self.events {
+            let fail = |msg: String| bad(format!("script {}: {msg}", e.label()));
+            let mut plates: Vec<u32> = Vec::new();
+            match &e.command {
+                Command::SetPhenomenon { name, .. }
+                    if !phenomena.iter().any(|p| p.name == name) =>
+                {
+                    let names: Vec<&str> = phenomena.iter().map(|p| p.name).collect();
+                    return Err(fail(format!(
+                        "unknown phenomenon \"{}\"; registered: {}",
+                        crate::resources::input::clip(name),
+                        names.join(", ")
+                    )));
+                }
+                Command::SetParam { key, value } if key.starts_with("plugins.") => {
+                    let mut p = sim.plugin_params().clone();
+                    p.set(key, (*value).into())
+                        .map_err(|err| fail(format!("set_param: {err}")))?;
+                }
+                Command::SetMotion {
+                    plate: PlateRef::Id(id),
+                    ..
+                }
+                | Command::RiftAt {
+                    plate: PlateRef::Id(id),
+                    ..
+                }
+                | Command::SetCrustType {
+                    plate: Some(PlateRef::Id(id)),
+                    ..
+                }
+                | Command::RiftLine {
+                    plate: Some(PlateRef::Id(id)),
+                    ..
+                } => plates.push(*id),
+                _ => {}
+            }
+            for id in plates {
+                if ids.binary_search(&id).is_ok() {
+                    continue;
+                }
+                if id < next_id {
+                    return Err(fail(format!(
+                        "plate {id} no longer exists (plates now: {}), and plate ids are never reused",
+                        id_list(&ids)
+                    )));
+                }
+                notes.push(format!(
+                    "script {}: plate {id} does not exist yet (plates now: {}); a rift must make it before the event, or the run stops there",
+                    e.label(),
+                    id_list(&ids)
+                ));
+            }
+        }
+        Ok(notes)
     }
 
     /// Applies every event whose time has come (`at_my` ≤ the planet's time, within half a
@@ -773,7 +901,7 @@ impl Script {
             self.next += 1;
             let outcome = sim
                 .apply(&e.command)
-                .map_err(|err| bad(format!("script event at {} My: {err}", e.at_my)))?;
+                .map_err(|err| bad(format!("script {}: {err}", e.label())))?;
             done.push((e, outcome));
         }
         Ok(done)
@@ -782,5 +910,25 @@ impl Script {
     /// Events not applied yet.
     pub fn remaining(&self) -> &[ScriptEvent] {
         &self.events[self.next..]
+    }
+}
+
+/// A list of plate ids for messages: all of them when few, else the first and last few.
+fn id_list(ids: &[u32]) -> String {
+    let show = |v: &[u32]| {
+        v.iter()
+            .map(|i| i.to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    if ids.len() <= 12 {
+        show(ids)
+    } else {
+        format!(
+            "{}, …, {}: {} plates",
+            show(&ids[..6]),
+            show(&ids[ids.len() - 3..]),
+            ids.len()
+        )
     }
 }

@@ -962,3 +962,191 @@ fn convergence_state_round_trips_with_and_without_fronts() {
     assert_eq!(fa.overriding_point, fb.overriding_point);
     assert_eq!(fa.subducting_distance_km, fb.subducting_distance_km);
 }
+
+// ---------------------------------------------------------------------------------------------
+// LZ4 bombs, special files and the size of a real save (issue #16).
+
+/// An LZ4 block that unpacks to `n` zero bytes in about `n / 255` bytes: one literal zero, a
+/// match of `n - 6` bytes at offset 1, five literal zeros.
+fn lz4_zeros(n: u64) -> Vec<u8> {
+    let mut b = vec![0x1F, 0x00, 0x01, 0x00];
+    let mut rest = n - 6 - 4 - 15;
+    while rest >= 255 {
+        b.push(255);
+        rest -= 255;
+    }
+    b.push(rest as u8);
+    b.push(0x50);
+    b.extend_from_slice(&[0; 5]);
+    b
+}
+
+/// `bytes` (a valid save) with section `name` replaced by `block` (LZ4, `raw_len` bytes
+/// unpacked), the header and checksum fixed.
+fn with_section(bytes: &[u8], name: &str, raw_len: u64, block: &[u8]) -> Vec<u8> {
+    let sections = save::read_sections(bytes, Path::new("good")).unwrap();
+    let mut body = Vec::new();
+    for s in &sections {
+        body.extend_from_slice(&(s.name.len() as u16).to_le_bytes());
+        body.extend_from_slice(s.name.as_bytes());
+        body.extend_from_slice(&s.version.to_le_bytes());
+        let (codec, raw, stored): (u8, u64, &[u8]) = if s.name == name {
+            (save::CODEC_LZ4, raw_len, block)
+        } else {
+            (save::CODEC_RAW, s.data.len() as u64, &s.data)
+        };
+        body.push(codec);
+        body.extend_from_slice(&raw.to_le_bytes());
+        body.extend_from_slice(&(stored.len() as u64).to_le_bytes());
+        body.extend_from_slice(stored);
+    }
+    let mut out = save::MAGIC.to_vec();
+    out.extend_from_slice(&save::FORMAT_VERSION.to_le_bytes());
+    out.extend_from_slice(&(sections.len() as u32).to_le_bytes());
+    out.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    out.extend_from_slice(&[0; 8]);
+    out.extend_from_slice(&body);
+    fix_checksum(&mut out);
+    out
+}
+
+/// Rows D and E of issue #16: a section that is a valid LZ4 block unpacking to hundreds of MB
+/// of NULs (checksum fixed) is refused from its claimed size, before anything is unpacked:
+/// `core.params` above 1 MiB, `core.history` above 64 MiB, any section above what the sample
+/// count allows. Under its cap, the NULs reach the section reader and are refused there.
+#[test]
+fn lz4_bombs_in_sections_are_refused_before_unpacking() {
+    let good = small_save(true);
+    // The block format is right: it unpacks to the zeros it claims.
+    assert_eq!(
+        lz4_flex::block::decompress(&lz4_zeros(5_000), 5_000).unwrap(),
+        vec![0u8; 5_000]
+    );
+    for (name, raw, limit) in [
+        ("core.params", 663u64 << 20, "1 MiB"),
+        ("core.params", 2_800_000_000, "1 MiB"),
+        ("core.history", 663 << 20, "64 MiB"),
+        ("core.crust", 663 << 20, "64 bytes a sample"),
+        ("convergence.state", 663 << 20, "256 bytes a sample"),
+    ] {
+        let bomb = with_section(&good, name, raw, &lz4_zeros(raw));
+        assert!(
+            bomb.len() < (raw / 200) as usize,
+            "a bomb: small file, large claim"
+        );
+        let t = std::time::Instant::now();
+        let e = load_err(&bomb);
+        let msg = e.to_string();
+        assert!(matches!(e.kind, LoadErrorKind::Layout(_)), "{msg}");
+        assert!(
+            msg.contains(name) && msg.contains(&raw.to_string()) && msg.contains(limit),
+            "{msg}"
+        );
+        assert!(t.elapsed().as_secs_f64() < 1.0, "{name}: {:?}", t.elapsed());
+    }
+    // Under the caps: unpacked, then refused by the readers.
+    for (name, raw, needle) in [
+        ("core.params", 100_000u64, "saved parameters are invalid"),
+        ("core.history", 10 << 20, "unread bytes"),
+    ] {
+        let bomb = with_section(&good, name, raw, &lz4_zeros(raw));
+        let msg = load_err(&bomb).to_string();
+        assert!(msg.contains(needle), "{name}: {msg}");
+        assert!(
+            msg.len() < 2_000,
+            "{name}: a message of {} bytes",
+            msg.len()
+        );
+    }
+}
+
+/// Only regular files are read as saves: a FIFO, a device, a folder are refused before they
+/// are opened; a file that is not a save costs a 32-byte read.
+#[test]
+fn only_regular_files_are_read_as_saves() {
+    for dev in ["/dev/zero", "/dev/urandom", "/dev/null"] {
+        let e = save::load_from_file(Path::new(dev)).err().unwrap();
+        assert!(matches!(e.kind, LoadErrorKind::NotAFile(_)), "{e}");
+        assert!(e.to_string().contains("character device"), "{e}");
+    }
+    let dir = temp_dir("special");
+    let sparse = dir.join("sparse.planet");
+    std::fs::File::create(&sparse)
+        .unwrap()
+        .set_len(3 << 30)
+        .unwrap();
+    let e = save::load_from_file(&sparse).err().unwrap();
+    assert!(matches!(e.kind, LoadErrorKind::BadMagic { .. }), "{e}");
+    // A save that claims more than the file holds is refused from the header alone.
+    let mut good = small_save(true);
+    good[16..24].copy_from_slice(&(1u64 << 40).to_le_bytes());
+    let p = dir.join("short.planet");
+    std::fs::write(&p, &good).unwrap();
+    let e = save::load_from_file(&p).err().unwrap();
+    assert!(matches!(e.kind, LoadErrorKind::Truncated { .. }), "{e}");
+}
+
+/// A save is never written over a file that is not one, nor over a FIFO or a device; through
+/// a symbolic link it replaces the link's target and keeps the link.
+#[test]
+fn saves_replace_only_saves_and_write_through_links() {
+    let dir = temp_dir("targets");
+    let mut sim = Simulation::new(small_params(2_000, 3)).unwrap();
+    let notes = dir.join("notes.txt");
+    std::fs::write(&notes, b"my notes").unwrap();
+    let e = save::save_to_file(&mut sim, &notes).unwrap_err();
+    assert!(matches!(e, save::SaveError::NotASave { .. }), "{e}");
+    assert_eq!(std::fs::read(&notes).unwrap(), b"my notes");
+    let e = save::save_to_file(&mut sim, Path::new("/dev/null")).unwrap_err();
+    assert!(matches!(e, save::SaveError::NotAFile { .. }), "{e}");
+    let real = dir.join("real.planet");
+    save::save_to_file(&mut sim, &real).unwrap();
+    let link = dir.join("link.planet");
+    std::os::unix::fs::symlink(&real, &link).unwrap();
+    sim.run_steps(2).unwrap();
+    save::save_to_file(&mut sim, &link).unwrap();
+    assert!(
+        std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    assert_eq!(save::load_from_file(&real).unwrap().clock().step, 2);
+}
+
+/// Every section a planet saves, and the caps on their sizes, are described in
+/// docs/save-format.md; and a real save stays inside the caps with a margin of a quarter.
+#[test]
+fn every_save_section_is_documented_and_inside_its_cap() {
+    let doc =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/save-format.md"))
+            .unwrap();
+    let mut sim = Simulation::new(small_params(20_000, 5)).unwrap();
+    sim.apply(&tectonic_planets::commands::Command::SetPhenomenon {
+        name: "hotspots".into(),
+        enabled: true,
+    })
+    .unwrap();
+    sim.run_steps(12).unwrap();
+    let samples = sim.mesh().len() as u64;
+    for s in sim.to_sections().unwrap() {
+        assert!(
+            doc.contains(&format!("**`{}`**", s.name)),
+            "docs/save-format.md does not describe section `{}`",
+            s.name
+        );
+        let (limit, _) = save::section_limit(&s.name, samples);
+        assert!(
+            (s.data.len() as u64) * 5 / 4 < limit,
+            "section `{}`: {} bytes, too close to its cap {limit}",
+            s.name,
+            s.data.len()
+        );
+    }
+    for needle in ["1 MiB", "64 MiB", "64 bytes a sample", "256 bytes a sample"] {
+        assert!(
+            doc.contains(needle),
+            "docs/save-format.md lacks the cap {needle:?}"
+        );
+    }
+}

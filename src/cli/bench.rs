@@ -72,8 +72,16 @@ pub(crate) fn bench_rifts(sim: &mut Simulation, n: usize) -> Result<Vec<f64>> {
 }
 
 pub(crate) fn bench(a: BenchArgs) -> Result<()> {
+    let (params, plugins) = planet_params(&a.planet)?;
+    check_run_length(
+        &format!("--steps {} and --resamplings {}", a.steps, a.resamplings),
+        a.steps.saturating_add(a.resamplings),
+        params.planet.samples as usize,
+        false,
+    )?;
     let t0 = Instant::now();
-    let mut sim = build_sim(&a.planet)?;
+    let mut sim = build_sim(&a.planet, params, plugins)?;
+    use_backend(&mut sim, a.planet.backend)?;
     let build = t0.elapsed();
     let n = sim.mesh().len();
     println!(

@@ -40,7 +40,8 @@ pub(crate) struct ExportArgs {
 #[derive(Args, Clone, Default)]
 pub(crate) struct ExtraExports {
     /// Amplified elevation (paper §5): a 16-bit PNG heightmap with a JSON sidecar
-    /// (`amplified16.png`, or `tile16.png` with --region), plus a GeoTIFF with --geotiff.
+    /// (`amplified16.png`, or `tile_amplified16.png` with --region), plus a GeoTIFF with
+    /// --geotiff.
     #[arg(long)]
     pub(crate) amplified: bool,
     /// Width of the global amplified heightmap (height is half); default: --width.
@@ -50,12 +51,14 @@ pub(crate) struct ExtraExports {
     /// --amplified.
     #[arg(long)]
     pub(crate) geotiff: bool,
-    /// Export a region instead of the globe: LAT0,LON0,LAT1,LON1 in degrees.
+    /// Export a region instead of the globe: LAT0,LON0,LAT1,LON1 in degrees, from the south-west
+    /// corner to the north-east one (LON0 > LON1 crosses the antimeridian).
     #[arg(long, value_name = "LAT0,LON0,LAT1,LON1", allow_hyphen_values = true)]
     pub(crate) region: Option<String>,
-    /// Pixel size of --region: 100m, 2km or 0.001deg (metres measured north-south).
-    #[arg(long, default_value = "100m")]
-    pub(crate) resolution: String,
+    /// Pixel size of --region: 100m, 2km or 0.001deg (metres measured north-south) [default:
+    /// 100m].
+    #[arg(long)]
+    pub(crate) resolution: Option<String>,
     /// Elevation exemplars for continental relief: a folder with andean/, himalayan/, old/,
     /// plain/ sub-folders of 16-bit PNG or GeoTIFF files.
     #[arg(long, value_name = "DIR")]
@@ -81,36 +84,189 @@ pub(crate) fn export(a: ExportArgs) -> Result<()> {
     check_width(a.width)?;
     let started = Instant::now();
     let mut sim = save::load_from_file(&a.file)?;
+    let exports = plan_extra_exports(&a.extra, a.width, sim.params().planet.radius_km, &a.out)?;
+    prepare_out_dir(&a.out)?;
+    if !a.no_maps {
+        check_output_files(&a.out, standard_output_names())?;
+    }
     if a.extra.amplified {
         use_backend(&mut sim, a.backend)?;
     }
     let mut files = if a.no_maps {
-        prepare_out_dir(&a.out)?;
         Vec::new()
     } else {
         write_outputs(&mut sim, &a.out, a.width)?
     };
-    files.extend(write_extra_exports(
-        &mut sim, &a.out, a.width, &a.extra, a.quiet,
-    )?);
+    if let Some(exports) = exports {
+        files.extend(write_extra_exports(&mut sim, &a.out, exports, a.quiet)?);
+    }
     if !a.quiet {
         report(&sim, started, &files);
     }
     Ok(())
 }
 
-/// Writes the opt-in exports of `e` into `out`; returns the files written. On the GPU backend
-/// the amplified heightmap is amplified on the device (procedural relief only).
+/// The opt-in exports of one command, checked before anything is computed or written: the
+/// grid, the exemplars (read), the files and their size against the limit and the free space.
+pub(crate) struct ExportPlan {
+    /// The options.
+    pub(crate) e: ExtraExports,
+    /// The grid of the amplified heightmap and the GeoTIFFs.
+    pub(crate) grid: tectonic_planets::io::export::GeoGrid,
+    /// `tile_` for a region, empty for the globe.
+    pub(crate) prefix: &'static str,
+    /// The exemplars, read.
+    pub(crate) exemplars: Option<tectonic_planets::amplify::exemplar::ExemplarSet>,
+}
+
+impl ExportPlan {
+    /// Whether the amplifier is needed.
+    fn wants_amp(&self) -> bool {
+        self.e.amplified || self.e.preview || self.e.gltf
+    }
+
+    /// The files this plan writes in the output folder.
+    pub(crate) fn file_names(&self) -> Vec<String> {
+        use tectonic_planets::io::export::CRUST_LAYERS;
+        let p = self.prefix;
+        let mut names = Vec::new();
+        if self.e.geotiff {
+            names.extend(
+                CRUST_LAYERS
+                    .iter()
+                    .map(|(stem, _)| format!("{p}{stem}.tif")),
+            );
+        }
+        if self.e.amplified {
+            names.push(format!("{p}amplified16.png"));
+            names.push(format!("{p}amplified16.json"));
+            if self.e.geotiff {
+                names.push(format!("{p}amplified.tif"));
+            }
+        }
+        if self.e.preview {
+            names.push(format!("{p}amplified_preview.png"));
+            names.push(format!("{p}crust_preview.png"));
+        }
+        if self.e.gltf {
+            names.push("planet.glb".into());
+        }
+        names
+    }
+
+    /// Bytes the GeoTIFFs and the 16-bit heightmap will take (their size is known before
+    /// they are computed; previews and the glTF mesh are small beside them).
+    pub(crate) fn known_bytes(&self) -> u64 {
+        use tectonic_planets::io::export::{CRUST_LAYERS, geotiff_bytes, heightmap16_bytes};
+        let (w, h) = (self.grid.width, self.grid.height);
+        let mut tiffs = 0;
+        if self.e.geotiff {
+            tiffs += CRUST_LAYERS.len() as u64;
+            if self.e.amplified {
+                tiffs += 1;
+            }
+        }
+        let png = if self.e.amplified {
+            heightmap16_bytes(w, h)
+        } else {
+            0
+        };
+        tiffs * geotiff_bytes(w, h) + png
+    }
+}
+
+/// Checks the opt-in exports of `e` before any work: flags that need others, the region and
+/// resolution, the relief scale and glTF options, the exemplars (read now), the total size of
+/// the files (at most [`MAX_EXPORT_BYTES`](tectonic_planets::io::export::MAX_EXPORT_BYTES)) and
+/// the free space where they go. `None` when no opt-in export is asked for.
+pub(crate) fn plan_extra_exports(
+    e: &ExtraExports,
+    width: u32,
+    radius_km: f64,
+    out: &Path,
+) -> Result<Option<ExportPlan>> {
+    use tectonic_planets::io::export::{self, GeoGrid};
+    let wants_amp = e.amplified || e.preview || e.gltf;
+    if let (Some(res), None) = (&e.resolution, &e.region) {
+        bail!(
+            "--resolution {} is the pixel size of --region, which is not given (global exports are sized by --width or --amplified-width)",
+            clip(res)
+        );
+    }
+    if !(wants_amp || e.geotiff) {
+        if e.region.is_some() || e.exemplars.is_some() {
+            bail!("--region and --exemplars need --amplified, --geotiff, --preview or --gltf");
+        }
+        if e.amplified_width.is_some() {
+            bail!("--amplified-width needs --amplified, --geotiff, --preview or --gltf");
+        }
+        return Ok(None);
+    }
+    if !(e.relief_scale.is_finite() && (0.0..=10.0).contains(&e.relief_scale)) {
+        bail!(
+            "--relief-scale must be between 0 and 10, got {}",
+            num(f64::from(e.relief_scale))
+        );
+    }
+    if e.gltf {
+        tectonic_planets::io::gltf::check_options(e.gltf_segments, e.exaggeration)?;
+    }
+    let (grid, prefix) = match &e.region {
+        Some(r) => {
+            if e.amplified_width.is_some() {
+                bail!(
+                    "--amplified-width sets the size of the global heightmap; with --region, the size follows --resolution"
+                );
+            }
+            let [lat0, lon0, lat1, lon1] = export::parse_region(r)?;
+            let res = e.resolution.as_deref().unwrap_or("100m");
+            let px = export::parse_resolution(res, radius_km)?;
+            let grid = GeoGrid::region(lat0, lon0, lat1, lon1, px)
+                .with_context(|| format!("--region {} at --resolution {}", clip(r), clip(res)))?;
+            (grid, "tile_")
+        }
+        None => {
+            let w = e.amplified_width.unwrap_or(width);
+            check_width(w).context("--amplified-width")?;
+            (GeoGrid::global(w, w / 2)?, "")
+        }
+    };
+    let exemplars = match &e.exemplars {
+        Some(dir) if wants_amp => Some(tectonic_planets::io::exemplars::load_exemplar_dir(dir)?),
+        Some(_) => {
+            bail!("--exemplars shape the amplified relief: add --amplified, --preview or --gltf")
+        }
+        None => None,
+    };
+    let plan = ExportPlan {
+        e: e.clone(),
+        grid,
+        prefix,
+        exemplars,
+    };
+    let needed = plan.known_bytes();
+    export::check_export_size(needed, out).with_context(|| {
+        format!(
+            "the exports of {}×{} pixels",
+            plan.grid.width, plan.grid.height
+        )
+    })?;
+    let names = plan.file_names();
+    check_output_files(out, names.iter().map(String::as_str))?;
+    Ok(Some(plan))
+}
+
+/// Writes the opt-in exports of `plan` into `out`; returns the files written. On the GPU
+/// backend the amplified heightmap is amplified on the device (procedural relief only).
 pub(crate) fn write_extra_exports(
     sim: &mut Simulation,
     out: &Path,
-    width: u32,
-    e: &ExtraExports,
+    plan: ExportPlan,
     quiet: bool,
 ) -> Result<Vec<PathBuf>> {
     // The context leaves the world while the mesh is borrowed, and goes back afterwards.
     let mut gpu = sim.world_mut().remove_resource::<GpuContext>();
-    let r = write_extra_exports_on(sim, gpu.as_mut(), out, width, e, quiet);
+    let r = write_extra_exports_on(sim, gpu.as_mut(), out, plan, quiet);
     if let Some(ctx) = gpu {
         sim.world_mut().insert_resource(ctx);
     }
@@ -122,26 +278,19 @@ pub(crate) fn write_extra_exports_on(
     sim: &mut Simulation,
     gpu: Option<&mut GpuContext>,
     out: &Path,
-    width: u32,
-    e: &ExtraExports,
+    plan: ExportPlan,
     quiet: bool,
 ) -> Result<Vec<PathBuf>> {
     use tectonic_planets::amplify::{Amplifier, AmplifyOptions};
     use tectonic_planets::io::export::{self, ElevationOutputs, GeoGrid};
     use tectonic_planets::io::gltf;
-    let wants_amp = e.amplified || e.preview || e.gltf;
-    if !(wants_amp || e.geotiff) {
-        if e.region.is_some() || e.exemplars.is_some() {
-            bail!("--region and --exemplars need --amplified, --geotiff, --preview or --gltf");
-        }
-        return Ok(Vec::new());
-    }
-    if !(e.relief_scale.is_finite() && (0.0..=10.0).contains(&e.relief_scale)) {
-        bail!(
-            "--relief-scale must be between 0 and 10, got {}",
-            e.relief_scale
-        );
-    }
+    let wants_amp = plan.wants_amp();
+    let ExportPlan {
+        e,
+        grid,
+        prefix,
+        exemplars,
+    } = plan;
     let say = |what: &str, t: Instant| {
         if !quiet {
             eprintln!("  {what} in {:.2} s", t.elapsed().as_secs_f64());
@@ -151,18 +300,6 @@ pub(crate) fn write_extra_exports_on(
     let seed = sim.params().planet.seed;
     let view = sim.resampled_crust();
     let mesh = sim.mesh();
-    let (grid, prefix) = match &e.region {
-        Some(r) => {
-            let [lat0, lon0, lat1, lon1] = export::parse_region(r)?;
-            let px = export::parse_resolution(&e.resolution, radius_km)?;
-            (GeoGrid::region(lat0, lon0, lat1, lon1, px)?, "tile_")
-        }
-        None => {
-            let w = e.amplified_width.unwrap_or(width);
-            check_width(w).context("--amplified-width")?;
-            (GeoGrid::global(w, w / 2)?, "")
-        }
-    };
     let mut files = Vec::new();
     if e.geotiff {
         let t = Instant::now();
@@ -180,8 +317,7 @@ pub(crate) fn write_extra_exports_on(
         ..Default::default()
     };
     let mut amp = Amplifier::new(mesh, &view, seed, options);
-    if let Some(dir) = &e.exemplars {
-        let set = tectonic_planets::io::exemplars::load_exemplar_dir(dir)?;
+    if let Some(set) = exemplars {
         amp = amp.with_exemplars(set, seed, options);
     }
     say("amplification tables", t);

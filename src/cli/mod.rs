@@ -15,7 +15,8 @@ use clap::{Args, Parser, Subcommand};
 use tectonic_planets::Simulation;
 use tectonic_planets::commands::Command as Cmd;
 use tectonic_planets::gpu::{BackendChoice, ComputeBackend};
-use tectonic_planets::resources::params::{ParamValue, Params};
+use tectonic_planets::resources::input::{clip, num};
+use tectonic_planets::resources::params::{ParamValue, Params, read_param_file};
 use tectonic_planets::resources::plugin_params::PluginConfig;
 
 use bench::*;
@@ -114,14 +115,14 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Generate(a) => generate(a),
         Command::Params { config } => {
-            let params = match &config {
-                Some(p) => Params::load(p)?,
-                None => Params::default(),
+            let (params, plugins) = match &config {
+                Some(p) => read_config(p)?,
+                None => (Params::default(), PluginConfig::default()),
             };
             let mut registry = tiny_sim()?;
-            if let Some(p) = &config {
-                registry.apply_plugin_config(&PluginConfig::load(p)?)?;
-            }
+            registry
+                .apply_plugin_config(&plugins)
+                .with_context(|| config_context(config.as_deref()))?;
             print!("{}", params.to_commented_toml());
             let plugin_toml = registry.plugin_params().to_commented_toml();
             if !plugin_toml.is_empty() {
@@ -173,7 +174,7 @@ pub(crate) fn apply_switches(
     };
     let (on, off) = (names(enable), names(disable));
     if let Some(n) = on.iter().find(|n| off.contains(n)) {
-        bail!("phenomenon \"{n}\" is both enabled and disabled");
+        bail!("phenomenon \"{}\" is both enabled and disabled", clip(n));
     }
     // Through the command API, so that the switches are in the history and replay.
     for (names, enabled) in [(&on, true), (&off, false)] {
@@ -187,12 +188,28 @@ pub(crate) fn apply_switches(
     Ok(())
 }
 
-/// Parameters from the config file and the command line, validated.
-pub(crate) fn load_params(a: &PlanetArgs) -> Result<Params> {
-    let mut params = match &a.config {
-        Some(p) => Params::load(p)?,
-        None => Params::default(),
-    };
+/// "config FILE", to say where a parameter error comes from.
+pub(crate) fn config_context(path: Option<&Path>) -> String {
+    match path {
+        Some(p) => format!("config {}", p.display()),
+        None => "plugin parameters".into(),
+    }
+}
+
+/// The core parameters and the plugin parameter tables of a config file, from one read of it
+/// (so that `--config <(...)` and `--config /dev/stdin` work).
+pub(crate) fn read_config(path: &Path) -> Result<(Params, PluginConfig)> {
+    let text = read_param_file(path)?;
+    let ctx = || config_context(Some(path));
+    let params = Params::from_toml_str(&text).with_context(ctx)?;
+    let plugins = PluginConfig::from_toml_str(&text).with_context(ctx)?;
+    Ok((params, plugins))
+}
+
+/// Parameters from the config file (already read, or the defaults) and the command line,
+/// validated.
+pub(crate) fn load_params(a: &PlanetArgs, base: Params) -> Result<Params> {
+    let mut params = base;
     let set = |params: &mut Params, key: &str, v: ParamValue| {
         params.set(key, v).map_err(anyhow::Error::from)
     };
@@ -216,10 +233,23 @@ pub(crate) fn load_params(a: &PlanetArgs) -> Result<Params> {
     Ok(params)
 }
 
+/// The most worker threads `--threads` may ask for: 4 per core, and never more than 256
+/// (more only adds switching: results do not depend on the thread count).
+pub(crate) fn max_threads() -> usize {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    (4 * cores).clamp(4, 256)
+}
+
 pub(crate) fn setup_threads(threads: Option<usize>) -> Result<()> {
     if let Some(n) = threads {
         if n == 0 {
             bail!("--threads must be at least 1");
+        }
+        let max = max_threads();
+        if n > max {
+            bail!(
+                "--threads {n} is more than this machine can use: at most {max} (4 per core, 256 at most); results do not depend on it"
+            );
         }
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
@@ -229,14 +259,32 @@ pub(crate) fn setup_threads(threads: Option<usize>) -> Result<()> {
     Ok(())
 }
 
-pub(crate) fn build_sim(a: &PlanetArgs) -> Result<Simulation> {
+/// The parameters of a new planet (the config, read once, and the command line), checked, and
+/// the thread pool; nothing is built yet.
+pub(crate) fn planet_params(a: &PlanetArgs) -> Result<(Params, PluginConfig)> {
     setup_threads(a.threads)?;
-    let params = load_params(a)?;
+    let (base, plugins) = match &a.config {
+        Some(p) => read_config(p)?,
+        None => (Params::default(), PluginConfig::default()),
+    };
+    Ok((load_params(a, base)?, plugins))
+}
+
+/// Steps of `my` million years at the time step of `params` (as `Simulation::steps_for`).
+pub(crate) fn steps_of(params: &Params, my: f64) -> u64 {
+    (my / params.time.time_step_my).round() as u64
+}
+
+/// Builds the planet of [`planet_params`]: the plugin parameters, the switches. The compute
+/// backend is chosen by the caller ([`use_backend`]) once every other check has passed.
+pub(crate) fn build_sim(
+    a: &PlanetArgs,
+    params: Params,
+    plugins: PluginConfig,
+) -> Result<Simulation> {
     let mut sim = Simulation::new(params)?;
-    use_backend(&mut sim, a.backend)?;
-    if let Some(path) = &a.config {
-        sim.apply_plugin_config(&PluginConfig::load(path)?)?;
-    }
+    sim.apply_plugin_config(&plugins)
+        .with_context(|| config_context(a.config.as_deref()))?;
     apply_switches(&mut sim, &a.switches.enable, &a.switches.disable)?;
     Ok(sim)
 }
@@ -274,15 +322,109 @@ pub(crate) fn check_width(width: u32) -> Result<()> {
 
 pub(crate) fn check_my(flag: &str, my: f64) -> Result<()> {
     if !my.is_finite() || my < 0.0 {
-        bail!("{flag} must be a finite, non-negative number of million years, got {my}");
+        bail!(
+            "{flag} must be a finite, non-negative number of million years, got {}",
+            num(my)
+        );
     }
     Ok(())
 }
 
+/// Work (samples × steps) above which a run is refused: about two weeks on the CPU of the
+/// 2-core machine of the README.
+pub(crate) const MAX_SAMPLE_STEPS: f64 = 1e13;
+/// Work above which the estimated time is printed first: about an hour there.
+pub(crate) const WARN_SAMPLE_STEPS: f64 = 3e10;
+/// Seconds per sample and step on that machine's CPU (`planet bench`: about 60 ms a step at
+/// 500,000 samples); a GPU is faster, so the estimate is an upper bound there.
+pub(crate) const SECONDS_PER_SAMPLE_STEP: f64 = 1.2e-7;
+
+/// A duration in words: `40 s`, `12 min`, `3.5 h`, `9 days`, `2e9 years`.
+pub(crate) fn duration_in_words(secs: f64) -> String {
+    let (v, unit) = if secs < 120.0 {
+        (secs, "s")
+    } else if secs < 7200.0 {
+        (secs / 60.0, "min")
+    } else if secs < 3.0 * 86400.0 {
+        (secs / 3600.0, "h")
+    } else if secs < 3.0 * 365.25 * 86400.0 {
+        (secs / 86400.0, "days")
+    } else {
+        (secs / (365.25 * 86400.0), "years")
+    };
+    if v < 1e6 {
+        format!("{v:.0} {unit}")
+    } else {
+        format!("{v:.1e} {unit}")
+    }
+}
+
+/// Refuses a run of `steps` steps on `samples` samples that would take weeks or more (a typo
+/// like `--my 1e12`), and says how long a long one will take before it starts. `what` names the
+/// option that asked for it.
+pub(crate) fn check_run_length(what: &str, steps: u64, samples: usize, quiet: bool) -> Result<()> {
+    let work = steps as f64 * samples as f64;
+    let estimate = duration_in_words(work * SECONDS_PER_SAMPLE_STEP);
+    if work > MAX_SAMPLE_STEPS {
+        bail!(
+            "{what} means {steps} steps of {samples} samples, about {estimate} of computing (estimated at {:.0} µs per 1,000 samples a step on a 2-core CPU); at most {MAX_SAMPLE_STEPS:.0e} samples × steps are run: ask for less time or fewer samples",
+            SECONDS_PER_SAMPLE_STEP * 1e9
+        );
+    }
+    if work > WARN_SAMPLE_STEPS && !quiet {
+        eprintln!(
+            "note: {what} means {steps} steps of {samples} samples: about {estimate} on a 2-core CPU (less on a GPU)"
+        );
+    }
+    Ok(())
+}
+
+/// Creates the output folder (after every other check, so that a refused command leaves no
+/// empty folder) and makes sure files can be written in it, before any work is done.
 pub(crate) fn prepare_out_dir(dir: &Path) -> Result<()> {
-    if dir.exists() && !dir.is_dir() {
-        bail!("output path {} exists and is not a folder", dir.display());
+    if let Ok(m) = std::fs::metadata(dir)
+        && !m.is_dir()
+    {
+        bail!(
+            "output path {} is {}, not a folder",
+            dir.display(),
+            tectonic_planets::resources::input::kind_in_words(m.file_type())
+        );
     }
     std::fs::create_dir_all(dir)
-        .with_context(|| format!("could not create output folder {}", dir.display()))
+        .with_context(|| format!("could not create output folder {}", dir.display()))?;
+    probe_writable(dir).with_context(|| format!("cannot write in output folder {}", dir.display()))
+}
+
+/// Creates and removes a file in `dir`: the check that it takes files, before a long run.
+pub(crate) fn probe_writable(dir: &Path) -> Result<()> {
+    let probe = dir.join(format!(".planet-write-test.{}", std::process::id()));
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .open(&probe)?;
+    std::fs::remove_file(&probe)?;
+    Ok(())
+}
+
+/// Refuses output files (in `dir`) that exist and are not regular files: a map written onto a
+/// FIFO would block, onto a device would be lost.
+pub(crate) fn check_output_files<'a>(
+    dir: &Path,
+    names: impl IntoIterator<Item = &'a str>,
+) -> Result<()> {
+    for name in names {
+        let p = dir.join(name);
+        if let Ok(m) = std::fs::metadata(&p)
+            && !m.is_file()
+        {
+            bail!(
+                "output file {} is {}; outputs only replace regular files (remove it or choose another --out)",
+                p.display(),
+                tectonic_planets::resources::input::kind_in_words(m.file_type())
+            );
+        }
+    }
+    Ok(())
 }

@@ -11,7 +11,7 @@ use tectonic_planets::Simulation;
 use tectonic_planets::commands::{Outcome, Script};
 use tectonic_planets::gpu::BackendChoice;
 use tectonic_planets::io::maps::{Raster, write_all_maps};
-use tectonic_planets::io::save::{self, CommandHistory};
+use tectonic_planets::io::save::{self, CommandHistory, SaveError};
 use tectonic_planets::io::summary::{CrustSampler, summarize};
 
 use super::*;
@@ -73,16 +73,35 @@ pub(crate) struct ResumeArgs {
     pub(crate) switches: SwitchArgs,
 }
 
-/// The save file and the number of steps between saves, from the options.
+/// Where and how often a run saves, and what it last saw of that file (to notice another
+/// writer).
+pub(crate) struct SavePlan {
+    /// The save file.
+    pub(crate) path: PathBuf,
+    /// Steps between saves (0: only at the end).
+    pub(crate) every: u64,
+    /// The file as this run last read or wrote it (`None`: it did not exist).
+    pub(crate) last_seen: Option<save::FileStamp>,
+    /// The path the user asked for, when another program replaced that file during the run
+    /// and this run's saves went to `path` instead.
+    pub(crate) diverted_from: Option<PathBuf>,
+}
+
+/// The save file and the number of steps between saves, from the options; checked before the
+/// run (a folder, a FIFO, a device or a link to one is refused, and the folder must take
+/// files), so that a run never ends unable to save.
 pub(crate) fn save_plan(
     sim: &Simulation,
     s: &SaveArgs,
     default: Option<&Path>,
-) -> Result<Option<(PathBuf, u64)>> {
+) -> Result<Option<SavePlan>> {
     let every = match s.save_every {
         Some(my) => {
             if !my.is_finite() || my <= 0.0 {
-                bail!("--save-every must be a finite, positive number of million years, got {my}");
+                bail!(
+                    "--save-every must be a finite, positive number of million years, got {}",
+                    num(my)
+                );
             }
             sim.steps_for(my)?.max(1)
         }
@@ -98,19 +117,60 @@ pub(crate) fn save_plan(
         ))),
         (None, None) => None,
     };
-    if let Some(p) = &path
-        && p.is_dir()
-    {
-        bail!("save path {} is a folder, not a file", p.display());
+    let Some(path) = path else {
+        return Ok(None);
+    };
+    if path.is_dir() {
+        bail!("save path {} is a folder, not a file", path.display());
     }
-    Ok(path.map(|p| (p, every)))
+    let target = save::check_save_target(&path)?;
+    let dir = match target.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&dir)
+        .with_context(|| format!("cannot create the folder of save {}", path.display()))?;
+    probe_writable(&dir)
+        .with_context(|| format!("cannot write save {} in {}", path.display(), dir.display()))?;
+    Ok(Some(SavePlan {
+        last_seen: save::FileStamp::of(&path),
+        path,
+        every,
+        diverted_from: None,
+    }))
 }
 
-pub(crate) fn save_now(sim: &mut Simulation, path: &Path) -> Result<()> {
+/// Saves to the plan's file. If another program replaced that file since this run last saw
+/// it, the file is left alone and this run's save goes beside it (`NAME.PID.planet`) from now
+/// on; the run says so at the end.
+pub(crate) fn save_now(sim: &mut Simulation, plan: &mut SavePlan) -> Result<()> {
     let t = Instant::now();
-    let info = save::save_to_file(sim, path)?;
+    let info = match save::save_to_file_checked(sim, &plan.path, &mut plan.last_seen) {
+        Err(SaveError::Replaced { .. }) if plan.diverted_from.is_none() => {
+            let stem = plan
+                .path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "planet".into());
+            let aside = plan.path.with_file_name(format!(
+                "{stem}.{}.{}",
+                std::process::id(),
+                save::EXTENSION
+            ));
+            eprintln!(
+                "warning: save {} was replaced by another program during this run; it is left as it is, and this run saves to {} instead",
+                plan.path.display(),
+                aside.display()
+            );
+            let asked = std::mem::replace(&mut plan.path, aside);
+            plan.diverted_from = Some(asked);
+            plan.last_seen = save::FileStamp::of(&plan.path);
+            save::save_to_file_checked(sim, &plan.path, &mut plan.last_seen)?
+        }
+        r => r?,
+    };
     tracing::info!(
-        path = %path.display(),
+        path = %plan.path.display(),
         bytes = info.file_bytes,
         ms = t.elapsed().as_secs_f64() * 1e3,
         "saved"
@@ -122,7 +182,7 @@ pub(crate) fn save_now(sim: &mut Simulation, path: &Path) -> Result<()> {
 #[derive(Default)]
 pub(crate) struct RunExtras<'a> {
     /// Save file and steps between saves (0: only at the end, by the caller).
-    pub(crate) plan: Option<&'a (PathBuf, u64)>,
+    pub(crate) plan: Option<&'a mut SavePlan>,
     /// Timed commands.
     pub(crate) script: Option<Script>,
     /// Map snapshots: folder, steps between snapshots and map width.
@@ -149,7 +209,7 @@ pub(crate) fn run_steps_with_progress(
     extras: RunExtras,
 ) -> Result<()> {
     let RunExtras {
-        plan,
+        mut plan,
         mut script,
         maps,
     } = extras;
@@ -192,12 +252,12 @@ pub(crate) fn run_steps_with_progress(
             let sub = dir.join(format!("t{:04.0}My", sim.time_my()));
             write_outputs(sim, &sub, *width)?;
         }
-        if let Some((path, every)) = plan
-            && *every > 0
-            && (k + 1) % every == 0
+        if let Some(plan) = plan.as_deref_mut()
+            && plan.every > 0
+            && (k + 1) % plan.every == 0
             && k + 1 < steps
         {
-            save_now(sim, path)?;
+            save_now(sim, plan)?;
         }
         bar.set_message(format!(
             "{:.0}/{:.0} My",
@@ -253,24 +313,44 @@ pub(crate) fn report(sim: &Simulation, started: Instant, files: &[PathBuf]) {
 pub(crate) fn generate(a: GenerateArgs) -> Result<()> {
     check_my("--my", a.my)?;
     check_width(a.width)?;
-    prepare_out_dir(&a.out)?;
     let started = Instant::now();
-    let mut sim = build_sim(&a.planet)?;
-    sim.world_mut()
-        .resource_mut::<CommandHistory>()
-        .record(0, command_line());
-    let plan = save_plan(&sim, &a.saving, None)?;
-    let steps = sim.steps_for(a.my)?;
+    // Everything that can be checked is checked before the run starts.
+    let (params, plugins) = planet_params(&a.planet)?;
+    check_run_length(
+        &format!("--my {}", num(a.my)),
+        steps_of(&params, a.my),
+        params.planet.samples as usize,
+        a.quiet,
+    )?;
+    // The script's syntax and values before the planet is built, the rest against it.
     let script = match &a.script {
         Some(path) => {
             let script = Script::load(path)?;
-            script.validate(sim.params())?;
+            script.validate(&params)?;
+            Some(script)
+        }
+        None => None,
+    };
+    let mut sim = build_sim(&a.planet, params, plugins)?;
+    sim.world_mut()
+        .resource_mut::<CommandHistory>()
+        .record(0, command_line());
+    let mut plan = save_plan(&sim, &a.saving, None)?;
+    let steps = sim.steps_for(a.my)?;
+    let script = match script {
+        Some(script) => {
+            let notes = script.validate_for(&mut sim)?;
             let late = script.events.iter().filter(|e| e.at_my > a.my).count();
-            if late > 0 && !a.quiet {
-                eprintln!(
-                    "note: {late} script event(s) come after the end of the run ({} My) and will not happen",
-                    a.my
-                );
+            if !a.quiet {
+                for n in notes {
+                    eprintln!("note: {n}");
+                }
+                if late > 0 {
+                    eprintln!(
+                        "note: {late} script event(s) come after the end of the run ({} My) and will not happen",
+                        num(a.my)
+                    );
+                }
             }
             Some(script)
         }
@@ -279,39 +359,148 @@ pub(crate) fn generate(a: GenerateArgs) -> Result<()> {
     let maps = match a.maps_every {
         Some(my) => {
             if !my.is_finite() || my <= 0.0 {
-                bail!("--maps-every must be a finite, positive number of million years, got {my}");
+                bail!(
+                    "--maps-every must be a finite, positive number of million years, got {}",
+                    num(my)
+                );
             }
             Some((a.out.clone(), sim.steps_for(my)?.max(1), a.width))
         }
         None => None,
     };
+    let exports = plan_extra_exports(&a.extra, a.width, sim.params().planet.radius_km, &a.out)?;
+    prepare_out_dir(&a.out)?;
+    check_output_files(&a.out, standard_output_names())?;
+    use_backend(&mut sim, a.planet.backend)?;
     let extras = RunExtras {
-        plan: plan.as_ref(),
+        plan: plan.as_mut(),
         script,
         maps,
     };
-    run_steps_with_progress(&mut sim, steps, a.quiet, extras)?;
-    let mut files = write_outputs(&mut sim, &a.out, a.width)?;
-    files.extend(write_extra_exports(
-        &mut sim, &a.out, a.width, &a.extra, a.quiet,
-    )?);
-    finish_run(&mut sim, plan.as_ref(), files, a.quiet, started)
+    let run = run_steps_with_progress(&mut sim, steps, a.quiet, extras);
+    if let Err(e) = run {
+        return Err(stopped_early(
+            &mut sim,
+            e,
+            plan.as_mut(),
+            Some(&a.out),
+            a.width,
+        ));
+    }
+    // The maps, then the exports, then the save: a failure of one still leaves the others.
+    let mut failures: Vec<anyhow::Error> = Vec::new();
+    let mut files = write_outputs(&mut sim, &a.out, a.width).unwrap_or_else(|e| {
+        failures.push(e);
+        Vec::new()
+    });
+    if let Some(exports) = exports {
+        match write_extra_exports(&mut sim, &a.out, exports, a.quiet) {
+            Ok(f) => files.extend(f),
+            Err(e) => failures.push(e),
+        }
+    }
+    finish_run(&mut sim, plan.as_mut(), files, failures, a.quiet, started)
 }
 
-/// The end of `generate` and `resume`: the final save (if any), then the report.
+/// The files `write_outputs` writes in the output folder.
+pub(crate) fn standard_output_names() -> impl IntoIterator<Item = &'static str> {
+    [
+        "elevation.png",
+        "plates.png",
+        "crust_age.png",
+        "crust_type.png",
+        "elevation16.png",
+        "elevation16.json",
+        "summary.json",
+    ]
+}
+
+/// The error of a run that stopped before its end (a script event that failed, a step that
+/// failed): the planet as it was is still saved and its maps written, and the message says at
+/// what time and where they are.
+pub(crate) fn stopped_early(
+    sim: &mut Simulation,
+    error: anyhow::Error,
+    plan: Option<&mut SavePlan>,
+    out: Option<&Path>,
+    width: u32,
+) -> anyhow::Error {
+    let at = sim.time_my();
+    let mut kept = Vec::new();
+    if let Some(plan) = plan {
+        match save_now(sim, plan) {
+            Ok(()) => kept.push(format!("saved to {}", plan.path.display())),
+            Err(e) => kept.push(format!("could not be saved ({e:#})")),
+        }
+    }
+    if let Some(out) = out {
+        match write_outputs(sim, out, width) {
+            Ok(_) => kept.push(format!("its maps written to {}", out.display())),
+            Err(e) => kept.push(format!("its maps could not be written ({e:#})")),
+        }
+    }
+    let what = if kept.is_empty() {
+        String::new()
+    } else {
+        format!("; the planet as it was then was {}", kept.join(" and "))
+    };
+    error.context(format!("the run stopped at {} My{what}", num(at)))
+}
+
+/// The end of `generate` and `resume`: the final save (if any), whatever failed before it, then
+/// the report. `failures` are the outputs that could not be written; the save is still made and
+/// the error names each failure and the save.
 pub(crate) fn finish_run(
     sim: &mut Simulation,
-    plan: Option<&(PathBuf, u64)>,
+    plan: Option<&mut SavePlan>,
     mut files: Vec<PathBuf>,
+    failures: Vec<anyhow::Error>,
     quiet: bool,
     started: Instant,
 ) -> Result<()> {
-    if let Some((path, _)) = plan {
-        save_now(sim, path)?;
-        files.push(path.clone());
+    let mut saved = None;
+    let mut diverted = None;
+    if let Some(plan) = plan {
+        match save_now(sim, plan) {
+            Ok(()) => {
+                files.push(plan.path.clone());
+                saved = Some(plan.path.clone());
+            }
+            Err(e) if failures.is_empty() => return Err(e),
+            Err(e) => {
+                let list: Vec<String> = failures.iter().map(|f| format!("{f:#}")).collect();
+                return Err(e.context(format!(
+                    "{}; and the planet could not be saved",
+                    list.join("; ")
+                )));
+            }
+        }
+        diverted = plan
+            .diverted_from
+            .clone()
+            .map(|asked| (asked, plan.path.clone()));
     }
     if !quiet {
         report(sim, started, &files);
+    }
+    if let Some(first) = failures
+        .into_iter()
+        .reduce(|a, b| a.context(format!("{b:#}")))
+    {
+        let kept = match &saved {
+            Some(p) => format!("the planet was saved to {}", p.display()),
+            None => "nothing was saved (no --save)".into(),
+        };
+        return Err(first.context(format!(
+            "the run finished but not every output was written ({kept})"
+        )));
+    }
+    if let Some((asked, path)) = diverted {
+        bail!(
+            "save {} was replaced by another program during this run and left as it is; this run's planet was saved to {}",
+            asked.display(),
+            path.display()
+        );
     }
     Ok(())
 }
@@ -320,27 +509,46 @@ pub(crate) fn resume(a: ResumeArgs) -> Result<()> {
     check_my("--my", a.my)?;
     check_width(a.width)?;
     setup_threads(a.threads)?;
-    if let Some(out) = &a.out {
-        prepare_out_dir(out)?;
-    }
     let started = Instant::now();
     let mut sim = save::load_from_file(&a.file)?;
     apply_switches(&mut sim, &a.switches.enable, &a.switches.disable)?;
-    use_backend(&mut sim, a.backend)?;
     let step = sim.clock().step;
     sim.world_mut()
         .resource_mut::<CommandHistory>()
         .record(step, command_line());
-    let plan = save_plan(&sim, &a.saving, Some(&a.file))?;
+    let mut plan = save_plan(&sim, &a.saving, Some(&a.file))?;
     let steps = sim.steps_for(a.my)?;
+    check_run_length(
+        &format!("--my {}", num(a.my)),
+        steps,
+        sim.mesh().len(),
+        a.quiet,
+    )?;
+    if let Some(out) = &a.out {
+        prepare_out_dir(out)?;
+        check_output_files(out, standard_output_names())?;
+    }
+    use_backend(&mut sim, a.backend)?;
     let extras = RunExtras {
-        plan: plan.as_ref(),
+        plan: plan.as_mut(),
         ..Default::default()
     };
-    run_steps_with_progress(&mut sim, steps, a.quiet, extras)?;
+    if let Err(e) = run_steps_with_progress(&mut sim, steps, a.quiet, extras) {
+        return Err(stopped_early(
+            &mut sim,
+            e,
+            plan.as_mut(),
+            a.out.as_deref(),
+            a.width,
+        ));
+    }
+    let mut failures = Vec::new();
     let files = match &a.out {
-        Some(out) => write_outputs(&mut sim, out, a.width)?,
+        Some(out) => write_outputs(&mut sim, out, a.width).unwrap_or_else(|e| {
+            failures.push(e);
+            Vec::new()
+        }),
         None => Vec::new(),
     };
-    finish_run(&mut sim, plan.as_ref(), files, a.quiet, started)
+    finish_run(&mut sim, plan.as_mut(), files, failures, a.quiet, started)
 }

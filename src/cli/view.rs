@@ -77,20 +77,21 @@ pub(crate) fn view(a: ViewArgs) -> Result<()> {
                 // A planet that steps briskly on a laptop; --samples asks for more.
                 planet.samples = Some(100_000);
             }
-            Ok((load_params(&planet)?, planet))
+            let (base, plugins) = match &planet.config {
+                Some(p) => read_config(p)?,
+                None => (Params::default(), PluginConfig::default()),
+            };
+            Ok((load_params(&planet, base)?, plugins))
         }
     };
     let switches = a.planet.switches.clone();
     let build = move || -> std::result::Result<Simulation, String> {
         let mut sim = match source {
             Err(path) => save::load_from_file(&path).map_err(|e| e.to_string())?,
-            Ok((params, planet)) => {
+            Ok((params, plugins)) => {
                 let mut sim = Simulation::new(params).map_err(|e| e.to_string())?;
-                if let Some(path) = &planet.config {
-                    let config = PluginConfig::load(path).map_err(|e| e.to_string())?;
-                    sim.apply_plugin_config(&config)
-                        .map_err(|e| e.to_string())?;
-                }
+                sim.apply_plugin_config(&plugins)
+                    .map_err(|e| e.to_string())?;
                 sim
             }
         };

@@ -83,7 +83,9 @@ impl GeoGrid {
     }
 
     /// The smallest window covering latitudes `lat0..lat1` and longitudes `lon0..lon1`
-    /// (degrees, any order) on the lattice of square pixels of `pixel_deg` degrees.
+    /// (degrees) on the lattice of square pixels of `pixel_deg` degrees. `lat0` must be south of
+    /// `lat1`; `lon0 > lon1` is a window across the antimeridian (its eastern bound is then
+    /// `lon1 + 360`).
     pub fn region(
         lat0: f64,
         lon0: f64,
@@ -91,29 +93,44 @@ impl GeoGrid {
         lon1: f64,
         pixel_deg: f64,
     ) -> Result<Self, ExportError> {
-        let (south, north) = (lat0.min(lat1), lat0.max(lat1));
-        let (west, east) = (lon0.min(lon1), lon0.max(lon1));
-        if ![south, north, west, east, pixel_deg]
-            .iter()
-            .all(|v| v.is_finite())
+        use crate::resources::input::num;
+        for (name, v) in [
+            ("LAT0", lat0),
+            ("LON0", lon0),
+            ("LAT1", lat1),
+            ("LON1", lon1),
+        ] {
+            if !v.is_finite() {
+                return Err(ExportError::Invalid(format!(
+                    "region {name} = {} is not a finite number",
+                    num(v)
+                )));
+            }
+        }
+        let corners = format!("{},{},{},{}", num(lat0), num(lon0), num(lat1), num(lon1));
+        if [lat0, lat1].iter().any(|l| l.abs() > 90.0)
+            || [lon0, lon1].iter().any(|l| l.abs() > 180.0)
         {
-            return Err(ExportError::Invalid(
-                "region and resolution must be finite numbers".into(),
-            ));
-        }
-        if south < -90.0 || north > 90.0 || west < -180.0 || east > 180.0 {
             return Err(ExportError::Invalid(format!(
-                "region {lat0},{lon0},{lat1},{lon1} is outside latitudes -90..90 and longitudes -180..180"
+                "region {corners} is outside latitudes -90..90 and longitudes -180..180"
             )));
         }
-        if north <= south || east <= west {
+        if lat0 >= lat1 {
             return Err(ExportError::Invalid(format!(
-                "region {lat0},{lon0},{lat1},{lon1} is empty"
+                "region {corners}: LAT0 must be south of LAT1 (the region runs from its south-west corner LAT0,LON0 to its north-east corner LAT1,LON1)"
             )));
         }
-        if !(pixel_deg > 1e-7 && pixel_deg <= 10.0) {
+        if lon0 == lon1 {
             return Err(ExportError::Invalid(format!(
-                "pixel size {pixel_deg}° is out of range (1e-7° to 10°)"
+                "region {corners} is empty: LON0 = LON1"
+            )));
+        }
+        let (south, north, west) = (lat0, lat1, lon0);
+        let east = if lon1 > lon0 { lon1 } else { lon1 + 360.0 };
+        if !(pixel_deg.is_finite() && pixel_deg > 1e-7 && pixel_deg <= 10.0) {
+            return Err(ExportError::Invalid(format!(
+                "pixel size {}° is out of range (1e-7° to 10°, about 1 cm to 1,100 km on the Earth)",
+                num(pixel_deg)
             )));
         }
         let i0 = ((west + 180.0) / pixel_deg + 1e-9).floor() as i64;
@@ -123,7 +140,8 @@ impl GeoGrid {
         let (w, h) = ((i1 - i0).max(1), (j1 - j0).max(1));
         if w > i64::from(MAX_SIDE) || h > i64::from(MAX_SIDE) {
             return Err(ExportError::Invalid(format!(
-                "region needs {w}×{h} pixels at {pixel_deg}°; at most {MAX_SIDE} a side (split it into tiles)"
+                "region needs {w}×{h} pixels at {}°; at most {MAX_SIDE} a side (split it into tiles)",
+                num(pixel_deg)
             )));
         }
         Ok(Self {
@@ -236,20 +254,31 @@ fn check_side(width: u32, height: u32) -> Result<(), ExportError> {
     Ok(())
 }
 
-/// Parses `LAT0,LON0,LAT1,LON1` (degrees).
+/// Parses `LAT0,LON0,LAT1,LON1` (degrees); each must be a finite number.
 pub fn parse_region(s: &str) -> Result<[f64; 4], ExportError> {
+    use crate::resources::input::clip;
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
-    let bad = || {
-        ExportError::Invalid(format!(
-            "--region expects LAT0,LON0,LAT1,LON1 in degrees, got `{s}`"
-        ))
-    };
     if parts.len() != 4 {
-        return Err(bad());
+        return Err(ExportError::Invalid(format!(
+            "--region expects LAT0,LON0,LAT1,LON1 in degrees, got `{}`",
+            clip(s)
+        )));
     }
     let mut v = [0.0; 4];
-    for (o, p) in v.iter_mut().zip(parts) {
-        *o = p.parse::<f64>().map_err(|_| bad())?;
+    for ((o, p), name) in v
+        .iter_mut()
+        .zip(parts)
+        .zip(["LAT0", "LON0", "LAT1", "LON1"])
+    {
+        *o = match p.parse::<f64>() {
+            Ok(x) if x.is_finite() => x,
+            _ => {
+                return Err(ExportError::Invalid(format!(
+                    "--region {name} = `{}` is not a finite number of degrees (--region expects LAT0,LON0,LAT1,LON1)",
+                    clip(p)
+                )));
+            }
+        };
     }
     Ok(v)
 }
@@ -260,7 +289,8 @@ pub fn parse_resolution(s: &str, radius_km: f64) -> Result<f64, ExportError> {
     let t = s.trim().to_ascii_lowercase();
     let bad = || {
         ExportError::Invalid(format!(
-            "--resolution expects e.g. 100m, 2km or 0.001deg, got `{s}`"
+            "--resolution expects e.g. 100m, 2km or 0.001deg, got `{}`",
+            crate::resources::input::clip(s)
         ))
     };
     let (num, unit_deg) = if let Some(n) = t.strip_suffix("deg") {
@@ -276,6 +306,88 @@ pub fn parse_resolution(s: &str, radius_km: f64) -> Result<f64, ExportError> {
         return Err(bad());
     }
     Ok(v * unit_deg)
+}
+
+/// Bytes of a float32 GeoTIFF of `width × height` pixels as [`GeoTiffWriter`] writes it.
+pub fn geotiff_bytes(width: u32, height: u32) -> u64 {
+    u64::from(width) * u64::from(height) * 4 + u64::from(height) * 8 + 4096
+}
+
+/// An upper bound of the bytes of a 16-bit PNG heightmap of `width × height` pixels and its
+/// sidecar (incompressible rows, plus the deflate framing).
+pub fn heightmap16_bytes(width: u32, height: u32) -> u64 {
+    let raw = (u64::from(width) * 2 + 1) * u64::from(height);
+    raw + raw / 100 + 8192
+}
+
+/// Most bytes one command may export: the largest global export (16384 × 8192 pixels: the six
+/// crust GeoTIFFs, the amplified one and its 16-bit heightmap) fits; a larger region must be
+/// split into tiles (regions on one lattice fit together exactly).
+pub const MAX_EXPORT_BYTES: u64 = 4 << 30;
+
+/// Bytes free for this process on the file system holding `dir` (or its nearest existing
+/// parent); `None` where the OS does not tell.
+pub fn free_bytes(dir: &Path) -> Option<u64> {
+    let mut d = dir;
+    while std::fs::metadata(d).is_err() {
+        d = d.parent().filter(|p| !p.as_os_str().is_empty())?;
+    }
+    free_bytes_at(d)
+}
+
+#[cfg(unix)]
+fn free_bytes_at(dir: &Path) -> Option<u64> {
+    use std::os::unix::ffi::OsStrExt;
+    let path = std::ffi::CString::new(dir.as_os_str().as_bytes()).ok()?;
+    let mut st = std::mem::MaybeUninit::<libc::statvfs>::uninit();
+    // SAFETY: `path` is a NUL-terminated string that outlives the call, and `st` is a buffer of
+    // the type statvfs fills; it is read only when the call succeeds.
+    let st = unsafe {
+        if libc::statvfs(path.as_ptr(), st.as_mut_ptr()) != 0 {
+            return None;
+        }
+        st.assume_init()
+    };
+    #[allow(clippy::unnecessary_cast)]
+    Some((st.f_bavail as u64).saturating_mul(st.f_frsize as u64))
+}
+
+#[cfg(not(unix))]
+fn free_bytes_at(_dir: &Path) -> Option<u64> {
+    None
+}
+
+/// Refuses an export of `needed` bytes into `dir` before it starts: more than
+/// [`MAX_EXPORT_BYTES`], or more than the free space there (with a margin of 1%).
+pub fn check_export_size(needed: u64, dir: &Path) -> Result<(), ExportError> {
+    check_export_size_with(needed, free_bytes(dir), dir)
+}
+
+/// [`check_export_size`] with the free space given (`None`: unknown, not checked).
+pub fn check_export_size_with(
+    needed: u64,
+    free: Option<u64>,
+    dir: &Path,
+) -> Result<(), ExportError> {
+    use crate::resources::input::bytes_in_words;
+    if needed > MAX_EXPORT_BYTES {
+        return Err(ExportError::Invalid(format!(
+            "would write {} of GeoTIFF and heightmap files, more than the {} one command may write (the largest global export); split the region into tiles or lower the resolution",
+            bytes_in_words(needed),
+            bytes_in_words(MAX_EXPORT_BYTES)
+        )));
+    }
+    if let Some(free) = free
+        && needed.saturating_add(needed / 100) > free
+    {
+        return Err(ExportError::Invalid(format!(
+            "would write {} of GeoTIFF and heightmap files, but only {} are free on the file system of {}",
+            bytes_in_words(needed),
+            bytes_in_words(free),
+            dir.display()
+        )));
+    }
+    Ok(())
 }
 
 /// What to write for the amplified elevation of a grid.
@@ -527,6 +639,23 @@ mod tests {
         let e = GeoGrid::region(0.0, 0.0, 80.0, 170.0, 0.0001).unwrap_err();
         assert!(e.to_string().contains("16384"), "{e}");
         assert!(parse_region("1,2,3").is_err());
+        let e = parse_region("NaN,0,1,1").unwrap_err().to_string();
+        assert!(
+            e.contains("LAT0") && e.contains("not a finite number"),
+            "{e}"
+        );
+        let e = GeoGrid::region(10.0, 0.0, 5.0, 1.0, 0.1)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("south of"), "{e}");
+        // Across the antimeridian: 170°E to 170°W is 20° wide.
+        let g = GeoGrid::region(0.0, 170.0, 1.0, -170.0, 0.1).unwrap();
+        assert_eq!(g.width, 200);
+        assert!((g.bounds().east - 190.0).abs() < 1e-9);
+        let e = GeoGrid::region(0.0, 0.0, 1.0, 1.0, 1e-300)
+            .unwrap_err()
+            .to_string();
+        assert!(e.len() < 200 && e.contains("1e-300"), "{e}");
         assert!(parse_resolution("fast", 6371.0).is_err());
         assert!(parse_resolution("-3m", 6371.0).is_err());
         let d = parse_resolution("100m", 6371.0).unwrap();
@@ -534,5 +663,27 @@ mod tests {
         let k = parse_resolution("2km", 6371.0).unwrap();
         assert!((k / d - 20.0).abs() < 1e-9);
         assert_eq!(parse_resolution("0.5deg", 6371.0).unwrap(), 0.5);
+    }
+
+    #[test]
+    fn oversized_exports_and_full_disks_are_refused_up_front() {
+        let dir = Path::new("/out");
+        // 14.5° × 14.5° at 100 m: 16120 pixels a side, six crust layers and the amplified one.
+        let big = 7 * geotiff_bytes(16_120, 16_120) + heightmap16_bytes(16_120, 16_120);
+        let e = check_export_size_with(big, None, dir)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("split the region"), "{e}");
+        // The largest global export fits.
+        let global = 7 * geotiff_bytes(16_384, 8_192) + heightmap16_bytes(16_384, 8_192);
+        check_export_size_with(global, None, dir).unwrap();
+        let e = check_export_size_with(1 << 30, Some(1 << 20), dir)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("only 1 MiB are free") && e.contains("/out"),
+            "{e}"
+        );
+        check_export_size_with(1 << 20, Some(1 << 30), dir).unwrap();
     }
 }

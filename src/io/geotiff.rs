@@ -57,6 +57,7 @@ pub enum GeoTiffError {
 /// A float32 single-band GeoTIFF being written, one row at a time from the north.
 pub struct GeoTiffWriter {
     path: PathBuf,
+    file: crate::io::pending::PendingFile,
     out: BufWriter<std::fs::File>,
     width: u32,
     height: u32,
@@ -94,12 +95,13 @@ impl GeoTiffWriter {
                 ),
             });
         }
-        let file = std::fs::File::create(path).map_err(io)?;
+        let (pending, file) = crate::io::pending::PendingFile::create(path).map_err(io)?;
         let mut out = BufWriter::with_capacity(1 << 20, file);
         let header = build_header(width, height, bounds, description);
         out.write_all(&header).map_err(io)?;
         Ok(Self {
             path: path.to_path_buf(),
+            file: pending,
             out,
             width,
             height,
@@ -126,7 +128,8 @@ impl GeoTiffWriter {
         Ok(())
     }
 
-    /// Flushes the file; fails if not every row was written.
+    /// Flushes the file and gives it its name (it is written under a temporary one until
+    /// then); fails if not every row was written.
     pub fn finish(mut self) -> Result<PathBuf, GeoTiffError> {
         if self.rows != self.height {
             return Err(GeoTiffError::Rows {
@@ -141,7 +144,8 @@ impl GeoTiffWriter {
         };
         self.out.flush().map_err(io)?;
         let _ = self.out.stream_position();
-        Ok(self.path)
+        drop(self.out);
+        self.file.commit().map_err(io)
     }
 }
 
@@ -394,8 +398,14 @@ pub fn read_single_band(bytes: &[u8]) -> Result<TiffRaster, String> {
              `gdal_translate -co COMPRESS=NONE -co TILED=NO in.tif out.tif`"
         ));
     }
-    if tiled || offsets.is_empty() {
+    if tiled {
         return Err("tiled TIFFs are not supported; use gdal_translate -co TILED=NO".into());
+    }
+    if n == 0 {
+        return Err("its image file directory is empty (no tags, so no image)".into());
+    }
+    if offsets.is_empty() {
+        return Err("it has no StripOffsets tag, so no image data".into());
     }
     if spp != 1 {
         return Err(format!("{spp} samples per pixel; expected one band"));

@@ -35,6 +35,23 @@ pub enum GltfError {
     },
 }
 
+/// Checks the mesh options before any work: 8 to 8192 segments, an exaggeration between 0 and
+/// 1000.
+pub fn check_options(segments: u32, exaggeration: f64) -> Result<(), GltfError> {
+    if !(8..=8192).contains(&segments) {
+        return Err(GltfError::Invalid(format!(
+            "segments must be between 8 and 8192, got {segments}"
+        )));
+    }
+    if !(exaggeration.is_finite() && (0.0..=1000.0).contains(&exaggeration)) {
+        return Err(GltfError::Invalid(format!(
+            "exaggeration must be between 0 and 1000, got {}",
+            crate::resources::input::num(exaggeration)
+        )));
+    }
+    Ok(())
+}
+
 /// Builds the `.glb` bytes of a sphere whose elevation (metres) at a unit direction is given
 /// by `elevation_m`, coloured by `colour` (linear RGB in 0..1).
 pub fn planet_glb(
@@ -43,20 +60,7 @@ pub fn planet_glb(
     colour: &(impl Fn(f32) -> [f32; 3] + Sync),
 ) -> Result<Vec<u8>, GltfError> {
     let seg = options.segments;
-    if !(8..=8192).contains(&seg) {
-        return Err(GltfError::Invalid(format!(
-            "segments must be between 8 and 8192, got {seg}"
-        )));
-    }
-    if !(options.exaggeration.is_finite()
-        && options.exaggeration >= 0.0
-        && options.exaggeration <= 1000.0)
-    {
-        return Err(GltfError::Invalid(format!(
-            "exaggeration must be between 0 and 1000, got {}",
-            options.exaggeration
-        )));
-    }
+    check_options(seg, options.exaggeration)?;
     if !(options.radius_km.is_finite() && options.radius_km > 0.0) {
         return Err(GltfError::Invalid("planet radius must be positive".into()));
     }

@@ -34,6 +34,7 @@ pub enum HeightmapError {
 /// scale: grey g is `min_m + g/65535·(max_m − min_m)` metres.
 pub struct Heightmap16Writer {
     path: PathBuf,
+    file: crate::io::pending::PendingFile,
     stream: png::StreamWriter<'static, BufWriter<std::fs::File>>,
     meta: Elevation16Meta,
     row_bytes: Vec<u8>,
@@ -41,7 +42,8 @@ pub struct Heightmap16Writer {
 }
 
 impl Heightmap16Writer {
-    /// Creates `path` (and, at `finish`, `path` with extension `.json`).
+    /// Creates `path` (under a temporary name until `finish`; then `path` with extension
+    /// `.json`).
     pub fn create(
         path: &Path,
         width: u32,
@@ -61,7 +63,7 @@ impl Heightmap16Writer {
             path: path.to_path_buf(),
             reason: e.to_string(),
         };
-        let file = std::fs::File::create(path).map_err(|e| err(&e))?;
+        let (pending, file) = crate::io::pending::PendingFile::create(path).map_err(|e| err(&e))?;
         let mut enc = png::Encoder::new(BufWriter::with_capacity(1 << 20, file), width, height);
         enc.set_color(png::ColorType::Grayscale);
         enc.set_depth(png::BitDepth::Sixteen);
@@ -91,6 +93,7 @@ impl Heightmap16Writer {
         };
         Ok(Self {
             path: path.to_path_buf(),
+            file: pending,
             stream,
             meta,
             row_bytes: Vec::with_capacity(width as usize * 2),
@@ -153,7 +156,9 @@ impl Heightmap16Writer {
         self.stream.finish().map_err(|e| err(&e, &self.path))?;
         let json_path = self.path.with_extension("json");
         let json = serde_json::to_string_pretty(&self.meta).map_err(|e| err(&e, &json_path))?;
+        // The PNG is written under a temporary name: it gets its own once whole.
+        let png = self.file.commit().map_err(|e| err(&e, &self.path))?;
         std::fs::write(&json_path, json).map_err(|e| err(&e, &json_path))?;
-        Ok((self.path, json_path))
+        Ok((png, json_path))
     }
 }

@@ -8,5 +8,6 @@ pub mod gltf;
 pub mod heightmap;
 pub mod hypsometry;
 pub mod maps;
+pub mod pending;
 pub mod save;
 pub mod summary;

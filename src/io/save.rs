@@ -169,34 +169,164 @@ pub fn resolve_save_path(name: &Path) -> PathBuf {
 
 /// Writes `sim` to `path` safely: to a temporary file beside it, flushed and synced, then
 /// renamed over `path`. However the write is interrupted, the previous save at `path` survives.
+/// A symbolic link at `path` is written through (the file it points to is replaced, the link
+/// stays); a FIFO, a device or a socket is refused ([`resolve_write_target`]).
 pub fn save_to_file(sim: &mut Simulation, path: &Path) -> Result<SaveInfo, SaveError> {
+    check_save_target(path)?;
     let (bytes, info) = save_to_bytes_with(sim, SaveOptions::default())?;
     write_atomic(path, |f| f.write_all(&bytes))?;
     Ok(info)
 }
 
+/// [`save_to_file`] for a program that saves the same file more than once: `last_seen` is the
+/// file as this program last read or wrote it ([`FileStamp::of`], `None` when it did not
+/// exist). If the file is no longer that one, another program replaced or changed it: it is
+/// left alone and [`SaveError::Replaced`] returned. On success `last_seen` becomes the new file.
+pub fn save_to_file_checked(
+    sim: &mut Simulation,
+    path: &Path,
+    last_seen: &mut Option<FileStamp>,
+) -> Result<SaveInfo, SaveError> {
+    check_save_target(path)?;
+    let (bytes, info) = save_to_bytes_with(sim, SaveOptions::default())?;
+    write_atomic_inner(path, Some(last_seen), |f| f.write_all(&bytes))?;
+    Ok(info)
+}
+
+/// Checks that a save may be written at `path`: [`resolve_write_target`] (no folder, FIFO,
+/// device or socket, nor a link to one), and a file already there must be empty or a save
+/// (start with [`MAGIC`]), so that a mistyped path never replaces another file. Returns where
+/// the save will go.
+pub fn check_save_target(path: &Path) -> Result<PathBuf, SaveError> {
+    use std::io::Read;
+    let target = resolve_write_target(path)?;
+    if let Ok(f) = File::open(&target) {
+        let mut head = Vec::with_capacity(MAGIC.len());
+        let _ = f.take(MAGIC.len() as u64).read_to_end(&mut head);
+        if !head.is_empty() && head != MAGIC[..head.len()] {
+            return Err(SaveError::NotASave {
+                path: path.to_path_buf(),
+            });
+        }
+    }
+    Ok(target)
+}
+
+/// What a file is at one moment (device, inode, length, modification time), to notice that
+/// another program replaced or rewrote it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FileStamp {
+    len: u64,
+    modified: Option<std::time::SystemTime>,
+    dev: u64,
+    ino: u64,
+}
+
+impl FileStamp {
+    /// The stamp of the file at `path` (through symbolic links); `None` when there is none.
+    pub fn of(path: &Path) -> Option<FileStamp> {
+        let m = std::fs::metadata(path).ok()?;
+        #[cfg(unix)]
+        let (dev, ino) = {
+            use std::os::unix::fs::MetadataExt;
+            (m.dev(), m.ino())
+        };
+        #[cfg(not(unix))]
+        let (dev, ino) = (0, 0);
+        Some(FileStamp {
+            len: m.len(),
+            modified: m.modified().ok(),
+            dev,
+            ino,
+        })
+    }
+}
+
+/// Where a write to `path` really goes: `path` itself when it is a regular file or does not
+/// exist, or the file that a symbolic link at `path` leads to (so that the link stays a link).
+/// Refuses a folder, a link to nothing, and anything that is not a regular file (a FIFO, a
+/// character or block device, a socket): a save never replaces one.
+pub fn resolve_write_target(path: &Path) -> Result<PathBuf, SaveError> {
+    let not_a_file = |kind: String| SaveError::NotAFile {
+        path: path.to_path_buf(),
+        kind,
+    };
+    let mut p = path.to_path_buf();
+    for hop in 0..40 {
+        let meta = match std::fs::symlink_metadata(&p) {
+            Ok(m) => m,
+            Err(e) if e.kind() == io::ErrorKind::NotFound && hop == 0 => return Ok(p),
+            Err(e) if e.kind() == io::ErrorKind::NotFound => {
+                return Err(not_a_file(format!(
+                    "a symbolic link to {}, which does not exist",
+                    p.display()
+                )));
+            }
+            Err(source) => {
+                return Err(SaveError::Io {
+                    path: path.to_path_buf(),
+                    what: "looking at what it is",
+                    source,
+                });
+            }
+        };
+        let t = meta.file_type();
+        if t.is_symlink() {
+            let to = std::fs::read_link(&p).map_err(|source| SaveError::Io {
+                path: path.to_path_buf(),
+                what: "reading the symbolic link",
+                source,
+            })?;
+            p = match p.parent() {
+                Some(dir) if to.is_relative() => dir.join(to),
+                _ => to,
+            };
+        } else if t.is_dir() {
+            return Err(SaveError::IsDirectory {
+                path: path.to_path_buf(),
+            });
+        } else if t.is_file() {
+            return Ok(p);
+        } else {
+            let kind = crate::resources::input::kind_in_words(t);
+            return Err(not_a_file(if hop == 0 {
+                kind.to_string()
+            } else {
+                format!("a symbolic link to {} ({kind})", p.display())
+            }));
+        }
+    }
+    Err(not_a_file("a chain of more than 40 symbolic links".into()))
+}
+
 /// Writes a file safely: `write` fills a temporary file in the same folder, which is flushed,
 /// synced and renamed over `path`; on any error the temporary file is removed and `path` is left
-/// as it was.
+/// as it was. A symbolic link at `path` is written through; anything but a regular file is
+/// refused ([`resolve_write_target`]). After a successful write, temporary files of the same
+/// target left by killed processes (`.NAME.PID.tmp` whose process is gone) are removed.
 pub fn write_atomic(
     path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> io::Result<()>,
+) -> Result<(), SaveError> {
+    write_atomic_inner(path, None, write)
+}
+
+fn write_atomic_inner(
+    path: &Path,
+    last_seen: Option<&mut Option<FileStamp>>,
     write: impl FnOnce(&mut dyn Write) -> io::Result<()>,
 ) -> Result<(), SaveError> {
     let err = |what: &'static str| {
         let path = path.to_path_buf();
         move |source| SaveError::Io { path, what, source }
     };
-    if path.is_dir() {
-        return Err(SaveError::IsDirectory {
-            path: path.to_path_buf(),
-        });
-    }
-    let dir = match path.parent() {
+    let target = resolve_write_target(path)?;
+    let dir = match target.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
     };
     std::fs::create_dir_all(&dir).map_err(err("creating its folder"))?;
-    let name = path
+    let name = target
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "save".into());
@@ -211,15 +341,30 @@ pub fn write_atomic(
             .map_err(err("flushing the temporary file"))?;
         file.sync_all().map_err(err("syncing the temporary file"))?;
         drop(file);
-        std::fs::rename(&tmp, path).map_err(err("renaming the temporary file over it"))?;
+        if let Some(seen) = &last_seen
+            && FileStamp::of(&target) != **seen
+        {
+            return Err(SaveError::Replaced {
+                path: path.to_path_buf(),
+            });
+        }
+        std::fs::rename(&tmp, &target).map_err(err("renaming the temporary file over it"))?;
         // Make the rename durable (best effort: not every platform can sync a folder).
         if let Ok(d) = File::open(&dir) {
             let _ = d.sync_all();
         }
         Ok(())
     })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
+    match &result {
+        Err(_) => {
+            let _ = std::fs::remove_file(&tmp);
+        }
+        Ok(()) => {
+            if let Some(seen) = last_seen {
+                *seen = FileStamp::of(&target);
+            }
+            crate::io::pending::remove_stale_temps(&dir, &name, "tmp");
+        }
     }
     result
 }
@@ -227,61 +372,115 @@ pub fn write_atomic(
 // ---------------------------------------------------------------------------------------------
 // Reading.
 
+/// The header fields a reader needs once [`check_header`] accepted them.
+struct Header {
+    /// Number of sections.
+    count: u32,
+}
+
+/// Checks the start of a save (`head`, its first bytes, up to [`HEADER_LEN`]) against the
+/// length of the whole file: magic, version, and the body length the header gives. Run before
+/// the rest of a file is read, so a file that is not a save costs a 32-byte read.
+fn check_header(head: &[u8], file_len: u64) -> Result<Header, LoadErrorKind> {
+    if file_len == 0 {
+        return Err(LoadErrorKind::Empty);
+    }
+    let magic = &head[..head.len().min(8)];
+    if magic != &MAGIC[..magic.len()] {
+        return Err(LoadErrorKind::BadMagic {
+            found: magic.escape_ascii().to_string(),
+        });
+    }
+    if file_len < HEADER_LEN as u64 || head.len() < HEADER_LEN {
+        return Err(LoadErrorKind::Truncated {
+            expected: HEADER_LEN as u64,
+            actual: file_len.min(head.len() as u64),
+        });
+    }
+    let u32_at = |o: usize| u32::from_le_bytes([head[o], head[o + 1], head[o + 2], head[o + 3]]);
+    let version = u32_at(8);
+    if version == 0 {
+        return Err(LoadErrorKind::InvalidVersion);
+    }
+    if version > FORMAT_VERSION {
+        return Err(LoadErrorKind::NewerVersion {
+            found: version,
+            supported: FORMAT_VERSION,
+        });
+    }
+    let mut body_len_b = [0u8; 8];
+    body_len_b.copy_from_slice(&head[16..24]);
+    let body_len = u64::from_le_bytes(body_len_b);
+    let actual = file_len - HEADER_LEN as u64;
+    if body_len > actual {
+        return Err(LoadErrorKind::Truncated {
+            expected: body_len.saturating_add(HEADER_LEN as u64),
+            actual: file_len,
+        });
+    }
+    if body_len < actual {
+        return Err(LoadErrorKind::TrailingBytes {
+            extra: actual - body_len,
+        });
+    }
+    Ok(Header { count: u32_at(12) })
+}
+
+/// One entry of the section table, its content still as stored.
+struct StoredSection<'a> {
+    name: String,
+    version: u32,
+    codec: u8,
+    raw_len: u64,
+    data: &'a [u8],
+}
+
+/// Most bytes a save file may have. A 4,000,000-sample planet saves to a few hundred MB.
+pub const MAX_FILE_BYTES: u64 = 4 << 30;
+/// Largest `core.params` section (the parameters as commented TOML, about 20 KB).
+pub const MAX_PARAMS_BYTES: u64 = crate::resources::input::MAX_CONFIG_BYTES;
+/// Largest `core.history` section (a line per command line and per authoring command).
+pub const MAX_HISTORY_BYTES: u64 = 64 << 20;
+
+/// The most uncompressed bytes a section named `name` may hold in a save of `samples` samples,
+/// and what bounds it (for messages). Sections whose size follows the sample count get a budget
+/// per sample (`core.crust` holds 46 bytes a sample, `core.plates` and `convergence.state`
+/// less than 128); the others a fixed cap. Checked before anything is decompressed, so a
+/// section claiming more (an LZ4 bomb) costs nothing.
+pub fn section_limit(name: &str, samples: u64) -> (u64, &'static str) {
+    match name {
+        "core.params" => (MAX_PARAMS_BYTES, "the parameters"),
+        "core.mesh" | "core.clock" => (1 << 10, "a fixed record"),
+        "core.phenomena" | "core.plugin_params" => (1 << 20, "a list of names and values"),
+        "core.history" => (MAX_HISTORY_BYTES, "the command history"),
+        "core.crust" => (
+            samples.saturating_mul(64).saturating_add(1 << 12),
+            "64 bytes a sample",
+        ),
+        _ => (
+            samples.saturating_mul(256).saturating_add(16 << 20),
+            "256 bytes a sample and 16 MiB",
+        ),
+    }
+}
+
 /// Checks the header and checksum and splits a save into its (decompressed) sections, without
-/// interpreting them. Errors name the problem; `file` is only used in them.
+/// interpreting them beyond the parameters: their sample count bounds the size of every other
+/// section ([`section_limit`]), checked before anything is decompressed. Errors name the
+/// problem; `file` is only used in them.
 pub fn read_sections(bytes: &[u8], file: &Path) -> Result<Vec<RawSection>, LoadError> {
     let fail = |kind| LoadError {
         file: file.to_path_buf(),
         kind,
     };
-    if bytes.is_empty() {
-        return Err(fail(LoadErrorKind::Empty));
-    }
-    let head = &bytes[..bytes.len().min(8)];
-    if head != &MAGIC[..head.len()] {
-        return Err(fail(LoadErrorKind::BadMagic {
-            found: head.escape_ascii().to_string(),
-        }));
-    }
-    if bytes.len() < HEADER_LEN {
-        return Err(fail(LoadErrorKind::Truncated {
-            expected: HEADER_LEN as u64,
-            actual: bytes.len() as u64,
-        }));
-    }
-    let u32_at =
-        |o: usize| u32::from_le_bytes([bytes[o], bytes[o + 1], bytes[o + 2], bytes[o + 3]]);
-    let version = u32_at(8);
-    if version == 0 {
-        return Err(fail(LoadErrorKind::InvalidVersion));
-    }
-    if version > FORMAT_VERSION {
-        return Err(fail(LoadErrorKind::NewerVersion {
-            found: version,
-            supported: FORMAT_VERSION,
-        }));
-    }
-    let count = u32_at(12);
-    let mut body_len_b = [0u8; 8];
-    body_len_b.copy_from_slice(&bytes[16..24]);
-    let body_len = u64::from_le_bytes(body_len_b);
-    let actual = (bytes.len() - HEADER_LEN) as u64;
-    if body_len > actual {
-        return Err(fail(LoadErrorKind::Truncated {
-            expected: body_len.saturating_add(HEADER_LEN as u64),
-            actual: bytes.len() as u64,
-        }));
-    }
-    if body_len < actual {
-        return Err(fail(LoadErrorKind::TrailingBytes {
-            extra: actual - body_len,
-        }));
-    }
-    let stored = u32_at(24);
+    let header =
+        check_header(&bytes[..bytes.len().min(HEADER_LEN)], bytes.len() as u64).map_err(fail)?;
+    let stored = u32::from_le_bytes([bytes[24], bytes[25], bytes[26], bytes[27]]);
     let computed = checksum(bytes);
     if stored != computed {
         return Err(fail(LoadErrorKind::Checksum { stored, computed }));
     }
+    let count = header.count;
     if count > MAX_SECTIONS {
         return Err(fail(LoadErrorKind::Layout(format!(
             "{count} sections (at most {MAX_SECTIONS} allowed)"
@@ -289,7 +488,7 @@ pub fn read_sections(bytes: &[u8], file: &Path) -> Result<Vec<RawSection>, LoadE
     }
     let layout = |m: String| fail(LoadErrorKind::Layout(m));
     let mut r = SectionReader::new(&bytes[HEADER_LEN..]);
-    let mut out: Vec<RawSection> = Vec::new();
+    let mut table: Vec<StoredSection> = Vec::new();
     for k in 0..count {
         let name_len = u16::from_le_bytes(
             r.take(2)
@@ -323,7 +522,7 @@ pub fn read_sections(bytes: &[u8], file: &Path) -> Result<Vec<RawSection>, LoadE
         let codec = r.u8().map_err(ctx)?;
         let raw_len = r.u64().map_err(ctx)?;
         let stored_len = r.u64().map_err(ctx)?;
-        if out.iter().any(|s| s.name == name) {
+        if table.iter().any(|s| s.name == name) {
             return Err(layout(format!("section `{name}` appears twice")));
         }
         if stored_len > r.remaining() as u64 {
@@ -334,51 +533,97 @@ pub fn read_sections(bytes: &[u8], file: &Path) -> Result<Vec<RawSection>, LoadE
             .into()));
         }
         let data = r.take(stored_len as usize).map_err(ctx)?;
-        let content = match codec {
-            CODEC_RAW => {
-                if raw_len != stored_len {
-                    return Err(ctx(format!(
-                        "raw section of {stored_len} bytes claims {raw_len} uncompressed"
-                    )
-                    .into()));
-                }
-                data.to_vec()
+        match codec {
+            CODEC_RAW if raw_len != stored_len => {
+                return Err(ctx(format!(
+                    "raw section of {stored_len} bytes claims {raw_len} uncompressed"
+                )
+                .into()));
             }
-            CODEC_LZ4 => {
-                // LZ4 cannot expand more than 255 times: refuse larger claims before allocating.
-                if raw_len > MAX_SECTION_BYTES || raw_len > stored_len.saturating_mul(255) + 16 {
-                    return Err(ctx(format!(
-                        "claims {raw_len} uncompressed bytes from {stored_len} compressed"
-                    )
-                    .into()));
-                }
-                let v = lz4_flex::block::decompress(data, raw_len as usize)
-                    .map_err(|e| ctx(format!("LZ4 data is damaged: {e}").into()))?;
-                if v.len() as u64 != raw_len {
-                    return Err(ctx(format!(
-                        "decompressed to {} bytes, {raw_len} announced",
-                        v.len()
-                    )
-                    .into()));
-                }
-                v
+            CODEC_RAW => {}
+            // LZ4 cannot expand more than 255 times: refuse larger claims before allocating.
+            CODEC_LZ4
+                if raw_len > MAX_SECTION_BYTES || raw_len > stored_len.saturating_mul(255) + 16 =>
+            {
+                return Err(ctx(format!(
+                    "claims {raw_len} uncompressed bytes from {stored_len} compressed"
+                )
+                .into()));
             }
+            CODEC_LZ4 => {}
             c => return Err(ctx(format!("unknown codec {c}").into())),
-        };
-        out.push(RawSection {
+        }
+        table.push(StoredSection {
             name,
             version: sversion,
-            data: content,
+            codec,
+            raw_len,
+            data,
         });
     }
     r.finish()
         .map_err(|e| layout(format!("after the last section: {e}")))?;
+    // The parameters first (under their own cap): their sample count bounds the rest.
+    let params = table
+        .iter()
+        .find(|s| s.name == "core.params")
+        .ok_or_else(|| fail(LoadErrorKind::MissingSection("core.params".into())))?;
+    let params_text = unpack(params, MAX_PARAMS_BYTES, "the parameters").map_err(layout)?;
+    let samples = crate::simulation::core_sections::parse_params(&params_text)
+        .map_err(fail)?
+        .planet
+        .samples;
+    let mut out: Vec<RawSection> = Vec::with_capacity(table.len());
+    for s in &table {
+        let data = if s.name == "core.params" {
+            params_text.clone()
+        } else {
+            let (limit, why) = section_limit(&s.name, samples);
+            unpack(s, limit, why).map_err(layout)?
+        };
+        out.push(RawSection {
+            name: s.name.clone(),
+            version: s.version,
+            data,
+        });
+    }
     Ok(out)
 }
 
-/// Reads a save file into bytes, with clear errors for a missing file, a directory, an
-/// unreadable or empty file.
+/// The content of a stored section, refused unbounded: more than `limit` bytes claimed
+/// (`why` says what sets the limit) is an error before anything is allocated.
+fn unpack(s: &StoredSection, limit: u64, why: &str) -> Result<Vec<u8>, String> {
+    let name = &s.name;
+    if s.raw_len > limit {
+        return Err(format!(
+            "section `{name}` claims {} uncompressed bytes, more than it can hold ({}: {why})",
+            s.raw_len,
+            crate::resources::input::bytes_in_words(limit)
+        ));
+    }
+    match s.codec {
+        CODEC_LZ4 => {
+            let v = lz4_flex::block::decompress(s.data, s.raw_len as usize)
+                .map_err(|e| format!("section `{name}`: LZ4 data is damaged: {e}"))?;
+            if v.len() as u64 != s.raw_len {
+                return Err(format!(
+                    "section `{name}`: decompressed to {} bytes, {} announced",
+                    v.len(),
+                    s.raw_len
+                ));
+            }
+            Ok(v)
+        }
+        _ => Ok(s.data.to_vec()),
+    }
+}
+
+/// Reads a save file into bytes, with clear errors for a missing file, a directory, anything
+/// that is not a regular file (a FIFO or a device is never opened for reading), an unreadable
+/// or empty file. The header is read and checked (magic, version, length against the file's)
+/// before the rest, so a file that is not a save costs 32 bytes of reading.
 pub fn read_file(path: &Path) -> Result<Vec<u8>, LoadError> {
+    use std::io::Read;
     let fail = |kind| LoadError {
         file: path.to_path_buf(),
         kind,
@@ -391,9 +636,39 @@ pub fn read_file(path: &Path) -> Result<Vec<u8>, LoadError> {
     if meta.is_dir() {
         return Err(fail(LoadErrorKind::IsDirectory));
     }
-    let bytes = std::fs::read(path).map_err(|e| fail(LoadErrorKind::Read(e)))?;
-    if bytes.is_empty() {
-        return Err(fail(LoadErrorKind::Empty));
+    let kind = |m: &std::fs::Metadata| crate::resources::input::kind_in_words(m.file_type());
+    if !meta.is_file() {
+        return Err(fail(LoadErrorKind::NotAFile(kind(&meta))));
+    }
+    let mut f = File::open(path).map_err(|e| fail(LoadErrorKind::Read(e)))?;
+    // What was opened is what is read (the path may have changed since it was looked at).
+    let meta = f.metadata().map_err(|e| fail(LoadErrorKind::Read(e)))?;
+    if !meta.is_file() {
+        return Err(fail(LoadErrorKind::NotAFile(kind(&meta))));
+    }
+    let len = meta.len();
+    if len > MAX_FILE_BYTES {
+        return Err(fail(LoadErrorKind::TooLarge {
+            bytes: len,
+            limit: MAX_FILE_BYTES,
+        }));
+    }
+    let mut head = Vec::with_capacity(HEADER_LEN);
+    (&mut f)
+        .take(HEADER_LEN as u64)
+        .read_to_end(&mut head)
+        .map_err(|e| fail(LoadErrorKind::Read(e)))?;
+    check_header(&head, len).map_err(fail)?;
+    let mut bytes = Vec::with_capacity(len as usize);
+    bytes.extend_from_slice(&head);
+    f.take(len - head.len() as u64)
+        .read_to_end(&mut bytes)
+        .map_err(|e| fail(LoadErrorKind::Read(e)))?;
+    if bytes.len() as u64 != len {
+        return Err(fail(LoadErrorKind::Truncated {
+            expected: len,
+            actual: bytes.len() as u64,
+        }));
     }
     Ok(bytes)
 }
@@ -417,7 +692,6 @@ pub fn load_from_bytes(bytes: &[u8], file: &Path) -> Result<Simulation, LoadErro
     load_from_bytes_with(bytes, file, TectonicPlugins)
 }
 
-/// Loads save bytes with the given plugin group; `file` names the source in errors.
 /// Loads save bytes with the given plugin group; `file` names the source in errors.
 pub fn load_from_bytes_with(
     bytes: &[u8],

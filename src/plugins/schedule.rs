@@ -360,7 +360,11 @@ impl std::fmt::Display for Phenomenon {
 
 /// A phenomenon name that no plugin registered.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("unknown phenomenon \"{name}\"; registered: {}", registered.join(", "))]
+#[error(
+    "unknown phenomenon \"{}\"; registered: {}",
+    crate::resources::input::clip(name),
+    registered.join(", ")
+)]
 pub struct UnknownPhenomenon {
     /// The name asked for.
     pub name: String,

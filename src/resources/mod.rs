@@ -1,9 +1,11 @@
 //! Resources of the simulation world: the crust fields, the clock, the plate lookup table used
 //! by per-sample kernels, step timings, the parameters and their schema ([`params`], and the
-//! plugins' [`plugin_params`]), and the save-section API ([`save_section`]).
+//! plugins' [`plugin_params`]), the save-section API ([`save_section`]), and the defensive
+//! reading of user files ([`input`]).
 
 pub mod convergence;
 pub mod crust;
+pub mod input;
 pub mod params;
 pub mod plate_table;
 pub mod plugin_params;

@@ -78,6 +78,37 @@ pub enum SaveError {
         /// The path.
         path: PathBuf,
     },
+    /// The target path is a FIFO, a device, a socket or a symbolic link to one (or to nothing):
+    /// a save never replaces one.
+    #[error(
+        "cannot write save {}: it is {kind}; a save only replaces a regular file (give another path)",
+        path.display()
+    )]
+    NotAFile {
+        /// The path.
+        path: PathBuf,
+        /// What it is, in words ("a FIFO (named pipe)", "a character device", ...).
+        kind: String,
+    },
+    /// The target is a file that is not a save (a typo must not cost a file).
+    #[error(
+        "cannot write save {}: it exists and is not a planet save (it does not start with \"PLANETSV\"); it is left as it is (remove it or give another path)",
+        path.display()
+    )]
+    NotASave {
+        /// The path.
+        path: PathBuf,
+    },
+    /// Another program replaced or changed the file since this one last read or wrote it; it
+    /// was left as it is.
+    #[error(
+        "save {} was replaced or changed by another program since this run last read or wrote it; it was left as it is",
+        path.display()
+    )]
+    Replaced {
+        /// The path.
+        path: PathBuf,
+    },
     /// A section could not be encoded.
     #[error("cannot encode save section `{section}`: {message}")]
     Encode {
@@ -107,6 +138,17 @@ pub enum LoadErrorKind {
     /// The path is a directory.
     #[error("is a directory, not a save file")]
     IsDirectory,
+    /// The path is a FIFO, a device or a socket: never read (it could block or never end).
+    #[error("is {0}, not a save file (only regular files are read)")]
+    NotAFile(&'static str),
+    /// The file is larger than any save can be.
+    #[error("is {} long, more than any save can be (at most {})", crate::resources::input::bytes_in_words(*bytes), crate::resources::input::bytes_in_words(*limit))]
+    TooLarge {
+        /// Its length, bytes.
+        bytes: u64,
+        /// The most a save may hold, bytes.
+        limit: u64,
+    },
     /// The file could not be read.
     #[error("cannot read: {0}")]
     Read(io::Error),

@@ -31,31 +31,34 @@ pub(crate) fn parse_toml_table(text: &str) -> Result<toml::Table, ParamError> {
     })
 }
 
-/// Reads a parameter file as text, with errors naming the path (missing, a folder, unreadable).
-pub(crate) fn read_param_file(path: &Path) -> Result<String, ParamError> {
+/// Reads a parameter file as text, once and at most
+/// [`MAX_CONFIG_BYTES`](crate::resources::input::MAX_CONFIG_BYTES) of it, with errors naming the
+/// path (missing, a folder, too large, unreadable). Pipes are read (`--config <(...)`); read the
+/// text once and give it to both [`Params::from_toml_str`] and
+/// [`PluginConfig::from_toml_str`](crate::resources::plugin_params::PluginConfig::from_toml_str).
+pub fn read_param_file(path: &Path) -> Result<String, ParamError> {
+    use crate::resources::input::{MAX_CONFIG_BYTES, TextFileError, read_text_capped};
     let owned = || path.to_path_buf();
-    match std::fs::metadata(path) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Err(ParamError::FileNotFound { path: owned() });
-        }
-        Err(source) => {
-            return Err(ParamError::Unreadable {
-                path: owned(),
-                source,
-            });
-        }
-        Ok(m) if m.is_dir() => return Err(ParamError::IsDirectory { path: owned() }),
-        Ok(_) => {}
-    }
-    let text = std::fs::read_to_string(path).map_err(|source| match source.kind() {
-        std::io::ErrorKind::NotFound => ParamError::FileNotFound { path: owned() },
-        std::io::ErrorKind::IsADirectory => ParamError::IsDirectory { path: owned() },
-        _ => ParamError::Unreadable {
+    read_text_capped(path, MAX_CONFIG_BYTES).map_err(|e| match e {
+        TextFileError::Missing => ParamError::FileNotFound { path: owned() },
+        TextFileError::Folder => ParamError::IsDirectory { path: owned() },
+        TextFileError::TooLarge { limit } => ParamError::FileTooLarge {
+            path: owned(),
+            limit,
+        },
+        TextFileError::NotUtf8 => ParamError::Unreadable {
+            path: owned(),
+            source: std::io::Error::new(std::io::ErrorKind::InvalidData, "not UTF-8 text"),
+        },
+        TextFileError::NotAFile(kind) => ParamError::Unreadable {
+            path: owned(),
+            source: std::io::Error::other(format!("it is {kind}")),
+        },
+        TextFileError::Io(source) => ParamError::Unreadable {
             path: owned(),
             source,
         },
-    })?;
-    Ok(text)
+    })
 }
 
 impl Params {

@@ -6,8 +6,8 @@
 mod file;
 mod schema;
 
-pub use file::PLUGINS_TABLE;
-pub(crate) use file::{parse_toml_table, read_param_file};
+pub(crate) use file::parse_toml_table;
+pub use file::{PLUGINS_TABLE, read_param_file};
 pub use schema::{ParamError, ParamKind, ParamSpec, ParamValue};
 pub(crate) use schema::{
     check_value, describe_toml, from_toml_value, levenshtein, suggest_threshold,
@@ -373,7 +373,9 @@ impl Params {
     /// Checks every field (finiteness and range) and the cross-field constraints:
     /// `init.plates <= planet.samples / 20`,
     /// `ocean.trench_elevation_km < ocean.abyssal_elevation_km < ocean.ridge_elevation_km < 0`,
-    /// `resample.min_interval_steps <= resample.max_interval_steps`.
+    /// `resample.min_interval_steps <= resample.max_interval_steps`,
+    /// `init.oceanic_elevation_km < init.continental_elevation_km <= continent.max_elevation_km`,
+    /// `subduction.control_distance_km < subduction.distance_km`.
     pub fn validate(&self) -> Result<(), ParamError> {
         for (spec, bounds) in SCHEMA.iter().zip(BOUNDS) {
             if let Some(v) = self.get_field(spec.key) {
@@ -405,6 +407,50 @@ impl Params {
                 min: r.min_interval_steps,
                 max: r.max_interval_steps,
             });
+        }
+        let ordered = [
+            (
+                ("init.oceanic_elevation_km", self.init.oceanic_elevation_km),
+                (
+                    "init.continental_elevation_km",
+                    self.init.continental_elevation_km,
+                ),
+                true,
+                "oceanic crust starts lower than continental crust",
+            ),
+            (
+                (
+                    "init.continental_elevation_km",
+                    self.init.continental_elevation_km,
+                ),
+                (
+                    "continent.max_elevation_km",
+                    self.continent.max_elevation_km,
+                ),
+                false,
+                "continents cannot start above the highest continental altitude",
+            ),
+            (
+                (
+                    "subduction.control_distance_km",
+                    self.subduction.control_distance_km,
+                ),
+                ("subduction.distance_km", self.subduction.distance_km),
+                true,
+                "subduction uplift peaks inside its reach (the distance transfer divides by (r_s - r_c)³)",
+            ),
+        ];
+        for ((lower_key, lower), (upper_key, upper), strict, why) in ordered {
+            if lower > upper || (strict && lower == upper) {
+                return Err(ParamError::OutOfOrder {
+                    lower_key,
+                    lower,
+                    upper_key,
+                    upper,
+                    strict,
+                    why,
+                });
+            }
         }
         Ok(())
     }

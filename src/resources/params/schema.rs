@@ -5,6 +5,7 @@ use std::fmt;
 use std::path::PathBuf;
 
 use super::{SCHEMA, SECTIONS};
+use crate::resources::input::{clip, clip_lines};
 
 /// A parameter value of one of the supported kinds.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -90,6 +91,17 @@ pub enum ParamError {
         /// The path that was given.
         path: PathBuf,
     },
+    /// The parameter file is larger than [`MAX_CONFIG_BYTES`](crate::resources::input::MAX_CONFIG_BYTES).
+    #[error(
+        "parameter file \"{}\" is larger than {} (a parameter file is a few KB; is it the right file?)",
+        path.display(), crate::resources::input::bytes_in_words(*limit)
+    )]
+    FileTooLarge {
+        /// The path that was given.
+        path: PathBuf,
+        /// The cap, bytes.
+        limit: u64,
+    },
     /// The parameter file exists but could not be read (permissions, not UTF-8, ...).
     #[error("cannot read parameter file \"{}\": {source}", path.display())]
     Unreadable {
@@ -99,7 +111,7 @@ pub enum ParamError {
         source: std::io::Error,
     },
     /// The text is not valid TOML.
-    #[error("malformed TOML: {message}")]
+    #[error("malformed TOML: {}", clip_lines(message, 12))]
     MalformedToml {
         /// 1-based line of the error, when known.
         line: Option<usize>,
@@ -109,7 +121,11 @@ pub enum ParamError {
         message: String,
     },
     /// A top-level table that is not a parameter section.
-    #[error("unknown parameter section [{section}]{}", fmt_suggestion(suggestion))]
+    #[error(
+        "unknown parameter section [{}]{}",
+        clip(section),
+        fmt_suggestion(suggestion)
+    )]
     UnknownSection {
         /// The section name as written.
         section: String,
@@ -117,7 +133,10 @@ pub enum ParamError {
         suggestion: Option<String>,
     },
     /// A section name was used with a non-table value (e.g. `ocean = 3`).
-    #[error("\"{section}\" is a parameter section and must be a table ([{section}]), got {found}")]
+    #[error(
+        "\"{section}\" is a parameter section and must be a table ([{section}]), got {}",
+        clip(found)
+    )]
     SectionNotTable {
         /// The section name.
         section: String,
@@ -125,7 +144,7 @@ pub enum ParamError {
         found: String,
     },
     /// A key that is not a parameter.
-    #[error("unknown parameter \"{key}\"{}", fmt_suggestion(suggestion))]
+    #[error("unknown parameter \"{}\"{}", clip(key), fmt_suggestion(suggestion))]
     UnknownKey {
         /// The full dotted key as written.
         key: String,
@@ -133,7 +152,7 @@ pub enum ParamError {
         suggestion: Option<String>,
     },
     /// The value has the wrong type for the parameter.
-    #[error("parameter \"{key}\" must be {}, got {found}", expected.expectation())]
+    #[error("parameter \"{}\" must be {}, got {}", clip(key), expected.expectation(), clip(found))]
     WrongType {
         /// The full dotted key.
         key: String,
@@ -143,7 +162,7 @@ pub enum ParamError {
         found: String,
     },
     /// A non-integral number was given for an integer parameter.
-    #[error("parameter \"{key}\" must be an integer, got {}", format_float(*value))]
+    #[error("parameter \"{}\" must be an integer, got {}", clip(key), format_float(*value))]
     NotIntegral {
         /// The full dotted key.
         key: String,
@@ -151,7 +170,11 @@ pub enum ParamError {
         value: f64,
     },
     /// A negative number was given for an integer parameter.
-    #[error("parameter \"{key}\" must be a non-negative integer, got {value}")]
+    #[error(
+        "parameter \"{}\" must be a non-negative integer, got {}",
+        clip(key),
+        clip(value)
+    )]
     Negative {
         /// The full dotted key.
         key: String,
@@ -159,7 +182,7 @@ pub enum ParamError {
         value: String,
     },
     /// NaN or an infinity was given.
-    #[error("parameter \"{key}\" = {} is not a finite number", format_float(*value))]
+    #[error("parameter \"{}\" = {} is not a finite number", clip(key), format_float(*value))]
     NonFinite {
         /// The full dotted key.
         key: String,
@@ -167,7 +190,10 @@ pub enum ParamError {
         value: f64,
     },
     /// The value lies outside the parameter's allowed range.
-    #[error("parameter \"{key}\" = {value} is out of range: allowed {min}..={max}")]
+    #[error(
+        "parameter \"{}\" = {value} is out of range: allowed {min}..={max}",
+        clip(key)
+    )]
     OutOfRange {
         /// The full dotted key.
         key: String,
@@ -212,6 +238,25 @@ pub enum ParamError {
         min: u64,
         /// `resample.max_interval_steps`.
         max: u64,
+    },
+    /// Two parameters that must be ordered are not.
+    #[error(
+        "{lower_key} = {} must be {} {upper_key} = {}: {why}",
+        format_float(*lower), if *strict { "below" } else { "at most" }, format_float(*upper)
+    )]
+    OutOfOrder {
+        /// The key that must be the smaller.
+        lower_key: &'static str,
+        /// Its value.
+        lower: f64,
+        /// The key that must be the larger.
+        upper_key: &'static str,
+        /// Its value.
+        upper: f64,
+        /// Whether equal values are refused too.
+        strict: bool,
+        /// What the order means.
+        why: &'static str,
     },
 }
 

@@ -45,10 +45,11 @@ pub mod prelude {
         TerranePlugin, phenomenon_enabled,
     };
     pub use crate::random::{SimRng, hash3, mix64, unit_f64, unit_vector};
+    pub use crate::resources::params::{dry_isostatic_gain, oceanic_load_gain};
     pub use crate::resources::{
         Crust, CrustType, Orogeny, ParamError, ParamKind, ParamSpec, ParamValue, Params,
-        PluginConfig, PluginParam, PluginParams, PluginParamsAppExt, ResampleRequest, SaveAppExt,
-        SaveSection, SectionError, SectionReader, SectionWriter, SimClock,
+        PluginConfig, PluginParam, PluginParams, PluginParamsAppExt, ReliefMode, ResampleRequest,
+        SaveAppExt, SaveSection, SectionError, SectionReader, SectionWriter, SimClock,
     };
     pub use crate::simulation::{SimError, Simulation};
     pub use bevy_app::{App, Plugin, PluginGroup};

@@ -215,11 +215,19 @@ fn plugins_are_listed_switched_and_configured() {
         .find(|l| l.starts_with("hotspots "))
         .unwrap_or_else(|| panic!("hotspots not listed: {text}"));
     assert!(line.contains("aging") && line.contains("off"), "{line}");
+    // The paper's erosion law is off by default; the relief phenomena replace it.
     assert!(
         text.lines()
-            .any(|l| l.starts_with("erosion ") && l.contains(" on ")),
+            .any(|l| l.starts_with("erosion ") && l.contains(" off ")),
         "{text}"
     );
+    for name in ["isostasy ", "drainage ", "rivers ", "sediment "] {
+        assert!(
+            text.lines()
+                .any(|l| l.starts_with(name) && l.contains(" on ")),
+            "{name}: {text}"
+        );
+    }
     let out = planet().arg("params").output().expect("run planet");
     let params = String::from_utf8_lossy(&out.stdout);
     assert!(params.contains("[plugins.hotspots]\n"), "{params}");

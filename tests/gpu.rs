@@ -230,24 +230,58 @@ fn subduction_uplift_kernel_matches_cpu_reference() {
             .push((rng.next_f64() * 400.0) as f32);
     }
     let params = Params::default();
-    let k = UpliftConstants::new(&params);
-    ctx.sync_crust(&crust, None).expect("upload");
-    subduction_uplift_dispatch(&mut ctx, &k, &fp, &field, None).expect("dispatch");
+    for isostatic in [false, true] {
+        let k = UpliftConstants::new(&params).with_isostasy(isostatic);
+        uplift_parity(&mut ctx, seed, &crust, &fp, &field, &k);
+    }
+}
+
+/// One uplift step on the device and on the host from the same inputs, compared.
+fn uplift_parity(
+    ctx: &mut GpuContext,
+    seed: u64,
+    crust: &Crust,
+    fp: &FrontPoints,
+    field: &ConvergenceField,
+    k: &UpliftConstants,
+) {
+    ctx.sync_crust(crust, None).expect("upload");
+    subduction_uplift_dispatch(ctx, k, fp, field, None).expect("dispatch");
     // Poisoned host copy: every field the kernel writes must come back from the device.
     let mut gpu = crust.clone();
     gpu.elevation_km.fill(f32::NAN);
     gpu.thickness_km.fill(f32::NAN);
     gpu.orogeny_age_my.fill(f32::NAN);
     gpu.fold_dir.fill([f32::NAN; 3]);
-    read_back(&mut ctx, &mut gpu).expect("readback");
+    read_back(ctx, &mut gpu).expect("readback");
     let mut cpu = crust.clone();
-    subduction_uplift_cpu(&k, &fp, &field, &mut cpu);
+    subduction_uplift_cpu(k, fp, field, &mut cpu);
     // Thickness: the uplift times 1/(1 − ρ_c/ρ_m) ≈ 6.6, so the elevation's 2e-5 km becomes
     // about 1.3e-4 km; within 2e-4 km (20 cm) on values up to the cap.
     let thickened = (0..N)
         .filter(|&i| cpu.thickness_km[i] > crust.thickness_km[i])
         .count();
-    assert!(thickened > N / 5, "seed {seed}: only {thickened} samples thickened");
+    let raised = (0..N)
+        .filter(|&i| cpu.elevation_km[i] != crust.elevation_km[i])
+        .count();
+    // Isostatic relief thickens the crust and leaves the elevation; the paper's raises the
+    // elevation (and cuts trenches) and leaves the thickness.
+    if k.isostatic {
+        assert!(
+            thickened > N / 5,
+            "seed {seed}: only {thickened} samples thickened"
+        );
+        assert_eq!(
+            raised, 0,
+            "seed {seed}: isostatic uplift changed the elevation"
+        );
+    } else {
+        assert!(raised > N / 5, "seed {seed}: only {raised} samples raised");
+        assert_eq!(
+            thickened, 0,
+            "seed {seed}: the paper's uplift changed the thickness"
+        );
+    }
     for i in 0..N {
         let d = (gpu.thickness_km[i] - cpu.thickness_km[i]).abs();
         assert!(
@@ -265,7 +299,7 @@ fn subduction_uplift_kernel_matches_cpu_reference() {
         .filter(|&i| cpu.orogeny[i] != crust.orogeny[i] || cpu.orogeny_age_my[i] == 0.0)
         .count();
     assert!(
-        changed > N / 5 && orogenies > N / 100,
+        (k.isostatic || changed > N / 5) && orogenies > N / 100,
         "seed {seed}: inputs too tame ({changed} changed, {orogenies} orogenies)"
     );
     // Tolerances: elevation within 2e-5 km (2 cm) everywhere (f32 transfer function on the GPU,
@@ -449,7 +483,10 @@ fn collision_uplift_kernel_matches_cpu_reference() {
     let thickened = (0..N)
         .filter(|&i| cpu.thickness_km[i] > crust.thickness_km[i])
         .count();
-    assert!(thickened > N / 5, "seed {seed}: only {thickened} samples thickened");
+    assert!(
+        thickened > N / 5,
+        "seed {seed}: only {thickened} samples thickened"
+    );
     eprintln!(
         "collision_uplift: {raised} raised, {himalayan} new orogenies, {flips} flips, \
          elevation within {max_dz:e} km, thickness within {max_dt:e} km, fold within {max_fold:e}"
@@ -882,9 +919,31 @@ fn fifty_steps_on_gpu_match_fifty_steps_on_cpu() {
         "land masks agree on {:.4}% of the area; RMS {rms_m:.4} m",
         agree * 100.0
     );
+    // With the relief phenomena the small f32 differences of the kernels (1e-5 km) flip the odd
+    // river's receiver, and incision then differs by hundreds of metres along that river: the
+    // same planet, not the same bits. Measured: 54 m RMS over 50 steps; the paper's relief
+    // (below) stays within 10 m.
+    assert!(agree >= 0.99, "land masks agree on {agree}");
+    assert!(rms_m <= 150.0, "elevation RMS difference {rms_m} m");
+    assert_eq!(cpu.clock().step, gpu.clock().step);
+}
+
+#[test]
+fn fifty_steps_of_the_papers_relief_on_gpu_match_the_cpu_within_ten_metres() {
+    if gpu_or_skip("fifty steps, paper relief").is_none() {
+        return;
+    }
+    let p = common::params(30_000, 17);
+    let mut cpu = Simulation::new(p.clone()).expect("sim");
+    let mut gpu = Simulation::new(p).expect("sim");
+    common::paper_relief(&mut cpu);
+    common::paper_relief(&mut gpu);
+    gpu.set_backend(BackendChoice::Gpu).expect("gpu backend");
+    cpu.run_steps(50).expect("cpu run");
+    gpu.run_steps(50).expect("gpu run");
+    let (agree, rms_m) = compare(cpu.mesh(), cpu.crust(), gpu.crust());
     assert!(agree >= 0.99, "land masks agree on {agree}");
     assert!(rms_m <= 10.0, "elevation RMS difference {rms_m} m");
-    assert_eq!(cpu.clock().step, gpu.clock().step);
 }
 
 #[test]
@@ -969,6 +1028,14 @@ fn gpu_sim(samples: u64, seed: u64, eager: bool) -> Simulation {
     sim
 }
 
+/// [`gpu_sim`] with the paper's relief (no relief phenomena, which read and write the crust on
+/// the host every step): for the budgets of the kernels' own traffic.
+fn paper_gpu_sim(samples: u64, seed: u64, eager: bool) -> Simulation {
+    let mut sim = gpu_sim(samples, seed, eager);
+    common::paper_relief(&mut sim);
+    sim
+}
+
 /// Steps `sim` 30 times, asking for a resampling before steps 8 and 19 (others come on their
 /// own); returns the device-newer masks seen after each step (before any pull).
 fn thirty_steps_with_resamplings(sim: &mut Simulation) -> Vec<FieldMask> {
@@ -1021,7 +1088,7 @@ fn a_steady_gpu_step_reads_back_a_few_bytes_per_sample() {
         return;
     }
     let n = 20_000u64;
-    let mut sim = gpu_sim(n, 9, false);
+    let mut sim = paper_gpu_sim(n, 9, false);
     sim.step().expect("first step");
     let mut measured = Vec::new();
     for _ in 0..12 {
@@ -1077,7 +1144,7 @@ fn writing_the_host_crust_while_the_device_is_newer_is_an_error() {
     }
     // A system that writes the crust after erosion without pulling: aging would upload the
     // stale host copy over the device's newer elevation and orogeny, so the step fails.
-    let mut bad = gpu_sim(10_000, 3, false);
+    let mut bad = paper_gpu_sim(10_000, 3, false);
     bad.app_mut().add_systems(
         TectonicStep,
         write_one_elevation.in_set(TectonicSystems::SlabPull),
@@ -1089,7 +1156,7 @@ fn writing_the_host_crust_while_the_device_is_newer_is_an_error() {
         other => panic!("expected a stale-write error, got {other:?}"),
     }
     // The same write after a pull is fine.
-    let mut good = gpu_sim(10_000, 3, false);
+    let mut good = paper_gpu_sim(10_000, 3, false);
     good.app_mut().add_systems(
         TectonicStep,
         pull_then_write_one_elevation.in_set(TectonicSystems::SlabPull),
@@ -1321,7 +1388,7 @@ fn a_resampling_gpu_step_moves_no_old_crust_over_the_bus() {
         return;
     }
     let n = 20_000u64;
-    let mut sim = gpu_sim(n, 9, false);
+    let mut sim = paper_gpu_sim(n, 9, false);
     // The first resampling uploads the kernels' per-run mesh data (positions, triangles,
     // locator cells: about 100 B/sample, once); measure the ones after it.
     sim.request_resample();

@@ -272,6 +272,7 @@ fn commands_name_plates_by_place_and_change_what_they_say() {
     let c = from_lat_lon_deg(cap.lat, cap.lon);
     let mesh = sim.mesh().clone();
     let before = sim.crust().clone();
+    let continental_z = sim.params().init.continental_elevation_km as f32;
     let out = sim
         .apply(&Command::SetCrustType {
             plate: None,
@@ -288,7 +289,7 @@ fn commands_name_plates_by_place_and_change_what_they_say() {
         let d = angle_between(mesh.positions[i], c) * R;
         if d < 480.0 {
             assert_eq!(after.crust_type[i], CrustType::Continental);
-            assert!(after.elevation_km[i] >= 0.8 - 1e-6);
+            assert!(after.elevation_km[i] >= continental_z - 1e-6);
         } else if d > 520.0 {
             assert_eq!(after.crust_type[i], before.crust_type[i]);
             assert_eq!(after.elevation_km[i], before.elevation_km[i]);

@@ -239,6 +239,17 @@ pub const WRITES: FieldMask = FieldMask(
         | FieldMask::FOLD_DIR.0,
 );
 
+/// The fields the kernel writes for isostatic relief (thickness) or the paper's (elevation),
+/// with the orogeny and fold fields.
+pub fn writes(isostatic: bool) -> FieldMask {
+    let relief = if isostatic {
+        FieldMask::THICKNESS
+    } else {
+        FieldMask::ELEVATION
+    };
+    FieldMask(relief.0 | FieldMask::OROGENY.0 | FieldMask::OROGENY_AGE.0 | FieldMask::FOLD_DIR.0)
+}
+
 /// Reads the fields the kernel writes ([`WRITES`]) back into `crust` (a [`GpuContext::pull`]
 /// of them; the simulation itself leaves them on the device and lets readers pull).
 pub fn read_back(ctx: &mut GpuContext, crust: &mut Crust) -> Result<(), GpuError> {

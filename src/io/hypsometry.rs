@@ -211,7 +211,11 @@ pub fn write_hypsometry_png(h: &Hypsometry, path: &Path, width: u32) -> Result<(
     };
     for km in -11..=9 {
         let y = y_of(km as f64 * 1000.0);
-        let c = if km == 0 { [60, 110, 200] } else { [225, 225, 225] };
+        let c = if km == 0 {
+            [60, 110, 200]
+        } else {
+            [225, 225, 225]
+        };
         for x in 0..w as i64 {
             put(&mut img, x, y, c);
         }

@@ -335,8 +335,26 @@ fn build_and_subside(
     hotspots: Query<&Hotspot>,
     mut edifices: Query<(Entity, &mut Edifice)>,
     mut marks: Local<Marks>,
+    mode: Option<Res<ReliefMode>>,
     mut gpu: Option<ResMut<GpuContext>>,
 ) {
+    // With isostatic relief the elevation follows from the crust at the next step: an edifice is
+    // built (and subsides) in thickness, by its height over the surface rise per km of crust
+    // there (about 0.15 on land, 0.35 on the sea floor), so it keeps the height it is given.
+    let isostatic = mode.is_some_and(|m| m.isostatic);
+    let (land_gain, sea_gain) = (
+        dry_isostatic_gain(&params) as f32,
+        oceanic_load_gain(&params) as f32,
+    );
+    let thickening = |crust: &Crust, i: usize, dz: f32| -> f32 {
+        if !isostatic {
+            dz
+        } else if crust.crust_type[i] == CrustType::Continental {
+            dz / land_gain
+        } else {
+            dz / sea_gain
+        }
+    };
     // On the GPU backend: the elevation is read, so it comes down; the writes touch only
     // elevation and thickness, so when the device is otherwise in sync they are declared and
     // only those two fields go up afterwards (8 B/sample) instead of the whole crust. When
@@ -418,7 +436,7 @@ fn build_and_subside(
         for &(i, d) in &samples {
             let dz = (dz_km * profile(d / r_rad)) as f32;
             crust.elevation_km[i] += dz;
-            crust.thickness_km[i] += dz;
+            crust.thickness_km[i] += thickening(crust, i, dz);
         }
         match near {
             Some((k, _)) => {
@@ -462,9 +480,12 @@ fn build_and_subside(
             &mut samples,
         );
         for &(i, d) in &samples {
-            let z = &mut crust.elevation_km[i];
-            let dz = ((loss_km * profile(d / r_rad)) as f32).min((*z - floor).max(0.0));
-            *z -= dz;
+            let z = crust.elevation_km[i];
+            let dz = ((loss_km * profile(d / r_rad)) as f32).min((z - floor).max(0.0));
+            crust.elevation_km[i] = z - dz;
+            if isostatic {
+                crust.thickness_km[i] -= thickening(crust, i, dz);
+            }
         }
         e.height_km -= loss_km;
         e.age_my += dt;

@@ -685,7 +685,7 @@ fn an_out_of_range_parameter_typed_in_the_panel_is_refused_with_a_message() {
     assert_eq!(h.app.sim.last_sent(), sent, "nothing was sent");
     let (after, history) = h.inspect(|sim| {
         (
-            sim.params().continent.erosion_mm_per_yr,
+            sim.params().rivers.erodibility_per_my,
             sim.world()
                 .resource::<crate::io::save::CommandHistory>()
                 .entries
@@ -727,7 +727,7 @@ fn a_parameter_change_from_the_panel_is_recorded_and_replays() {
     h.frame(Vec::new());
     h.app
         .param_text
-        .insert("continent.erosion_mm_per_yr".into(), "0.75".into());
+        .insert("rivers.erodibility_per_my".into(), "0.75".into());
     h.click("params:apply");
     h.settle();
     assert!(h.app.param_errors.is_empty(), "{:?}", h.app.param_errors);
@@ -747,7 +747,7 @@ fn a_parameter_change_from_the_panel_is_recorded_and_replays() {
     assert_eq!(commands.len(), 1, "one change: {commands:?}");
     assert_eq!(commands[0].0, 1, "applied after the first step");
     assert!(
-        matches!(&commands[0].1, crate::commands::Command::SetParam { key, .. } if key == "continent.erosion_mm_per_yr"),
+        matches!(&commands[0].1, crate::commands::Command::SetParam { key, .. } if key == "rivers.erodibility_per_my"),
         "{commands:?}"
     );
     let mut again = replay(small_params(), &commands, 3).expect("the run replays");

@@ -12,6 +12,19 @@ pub fn params(samples: u64, seed: u64) -> Params {
     p
 }
 
+/// The surface processes of the relief (isostasy, drainage, rivers, sediment): tests of moving,
+/// resampling or the paper's kernels switch them off.
+pub const RELIEF: [&str; 4] = ["isostasy", "drainage", "rivers", "sediment"];
+
+/// Switches the relief phenomena off and the paper's erosion law on: the relief as the paper
+/// makes it (uplift raises the elevation, trenches are cut into it), for tests of those kernels.
+pub fn paper_relief(sim: &mut Simulation) {
+    for name in RELIEF {
+        sim.set_enabled(name, false).unwrap();
+    }
+    sim.set_enabled("erosion", true).unwrap();
+}
+
 /// Area of the samples selected by `pick`, km².
 pub fn area_where(mesh: &SphereMesh, pick: impl Fn(usize) -> bool) -> f64 {
     (0..mesh.len())

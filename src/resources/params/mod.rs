@@ -213,7 +213,7 @@ define_params! {
         border_warp_km: f64 = 600.0, 0.0..=3000.0, "km", "Amplitude of the low-frequency noise that warps the Voronoi plate borders (replaces Driftworld's mesh-based vector noise n_sm and border shifts n_vb, which depend on resolution).";
         border_warp_wavelength_km: f64 = 3000.0, 100.0..=40000.0, "km", "Wavelength of the plate-border warping noise.";
         continent_wavelength_km: f64 = 4000.0, 100.0..=40000.0, "km", "Wavelength of the noise that shapes the initial coastlines.";
-        continental_elevation_km: f64 = 0.8, -2.0..=5.0, "km", "Mean initial elevation of continental crust (Driftworld z_0c).";
+        continental_elevation_km: f64 = 0.4, -2.0..=5.0, "km", "Mean initial elevation of continental crust (Driftworld z_0c = 0.8 km; 0.4 km stands the interiors of the first continents about where Earth's cratons stand).";
         oceanic_elevation_km: f64 = -4.0, -10.0..=0.0, "km", "Mean initial elevation of oceanic crust (Driftworld z_0t and its average ocean depth).";
         elevation_noise_km: f64 = 0.4, 0.0..=5.0, "km", "Amplitude of the low-frequency noise on initial elevations.";
         continental_thickness_km: f64 = 35.0, 1.0..=100.0, "km", "Initial thickness of continental crust.";
@@ -241,7 +241,7 @@ define_params! {
     [subduction] Subduction {
         distance_km: f64 = 900.0, 10.0..=10000.0, "km", "Subduction distance r_s: reach of the uplift on the overriding plate (paper: 1800 km; 900 km keeps active margins 200–750 km wide, as the Andes, DESIGN §7).";
         control_distance_km: f64 = 300.0, 1.0..=10000.0, "km", "Distance from the front where subduction uplift peaks (Driftworld: r_c = 0.1 R = 637 km; 300 km puts the range about where arcs stand, 200 km behind the trench, DESIGN §7).";
-        uplift_mm_per_yr: f64 = 0.6, 0.0..=100.0, "mm/yr", "Base subduction uplift u0.";
+        uplift_mm_per_yr: f64 = 0.9, 0.0..=100.0, "mm/yr", "Base subduction uplift u0 (paper: 0.6 mm/yr). With isostasy on, the surface rise before compensation: the crust thickens by u/(1 − ρ_c/ρ_m).";
         fold_weight: f64 = 0.1, 0.0..=10.0, "", "β: weight of the relative plate velocity in the fold direction update.";
         slab_pull_perturbation: f64 = 1.0, 0.0..=100.0, "", "Slab pull ε: the Euler pole of a subducting plate turns by 0.01·ε rad/My per radian of subduction front (normalised by front length, so independent of the sample count).";
         trench_width_km: f64 = 200.0, 1.0..=2000.0, "km", "Width of the trench on the subducting plate in front of a subduction front.";
@@ -255,7 +255,7 @@ define_params! {
         interpenetration_km: f64 = 300.0, 0.0..=5000.0, "km", "Interpenetration of continental crust that triggers a collision.";
         trapped_ocean_km2: f64 = 50000.0, 0.0..=1e8, "km²", "A patch of oceanic crust smaller than this, enclosed by the continental crust of one plate (an ocean closed by a collision), is welded into the continent at the next resampling.";
         min_terrane_km2: f64 = 100000.0, 0.0..=1e9, "km²", "Terranes smaller than this do not collide: they are forced under the other plate (paper §4.1) and counted as subducted continental crust.";
-        max_uplift_km: f64 = 1.0, 0.0..=30.0, "km", "Saturation of the collision surge: Δz = H·(1 − exp(−Δ_c·A/H)), Δ_c·A for small terranes, at most H for continents.";
+        max_uplift_km: f64 = 0.5, 0.0..=30.0, "km", "Saturation of the collision surge: Δz = H·(1 − exp(−Δ_c·A/H)), Δ_c·A for small terranes, at most H for continents (with isostasy on, the crust thickens by Δz/(1 − ρ_c/ρ_m): 3.3 km at 0.5 km, and collisions repeat).";
     }
     /// Isostasy: surface elevation from crust thickness (continents, regional Airy) and from
     /// sea-floor age (ocean, plate cooling); the trench in front of each subduction front.
@@ -268,15 +268,15 @@ define_params! {
         elastic_thickness_km: f64 = 25.0, 0.0..=200.0, "km", "Elastic thickness T_e of the lithosphere: the width of the regional response (flexure) that holds a range up with the crust around it (Watts 2001; continents 5–100 km). 0: local Airy.";
         max_flexural_support_km: f64 = 1.5, 0.0..=50.0, "km", "Most the regional response holds a sample above, or pulls it below, its local Airy level (a narrow range stands higher than Airy, the sea floor beside a continent sinks into a moat): it keeps one-sample contrasts (a lake filled with sediment, a sliver of thick crust) from standing kilometres proud over a moat as deep.";
         parsons_sclater: bool = false, false..=true, "", "Ocean depth by Parsons & Sclater 1977 (2.5 + 0.35·√t, then 6.4 − 3.2·e^(−t/62.8)) instead of GDH1 (Stein & Stein 1992: 2.6 + 0.365·√t, then 5.651 − 2.473·e^(−0.0278·t)).";
-        ridge_depth_offset_km: f64 = 0.2, -3.0..=3.0, "km", "Added to the age–depth law's depth: 0.2 puts the ridge axis near the observed −2.8 km (DESIGN §7).";
+        ridge_depth_offset_km: f64 = 0.0, -3.0..=3.0, "km", "Added to the age–depth law's depth (0: the published law, ridges at −2.6 km for GDH1; 0.2 puts them at the observed −2.8 km, DESIGN §7, but pelagic sediment aside, old floor then stands deeper than observed).";
         trench_depth_km: f64 = 3.5, 0.0..=15.0, "km", "Depth of a trench below the sea floor beside it, at the subduction front (observed 3–4 km, DESIGN §7).";
         trench_width_km: f64 = 80.0, 1.0..=2000.0, "km", "Distance from the front over which the trench shallows to the sea floor on either side (profile (1 − |d|/w)²: about 50 km wide at half depth; observed trenches are 40–120 km wide, DESIGN §7).";
-        max_thickness_km: f64 = 90.0, 10.0..=300.0, "km", "Subduction and collisions never thicken continental crust beyond this (about 8.6 km of elevation at the defaults).";
+        max_thickness_km: f64 = 75.0, 10.0..=300.0, "km", "Subduction and collisions never thicken continental crust beyond this (about 6.4 km of elevation under Airy isostasy at the defaults; the crust of Tibet is about 70 km thick).";
         max_oceanic_thickness_km: f64 = 30.0, 1.0..=300.0, "km", "Subduction never thickens oceanic crust (island arcs) beyond this (about +3 km on old sea floor at the defaults; real arcs have 20–35 km of crust).";
     }
     /// Rivers: the drainage network, stream-power incision and hillslope diffusion.
     [rivers] Rivers {
-        erodibility_per_my: f64 = 0.5, 0.0..=1000.0, "km^(1−2m)/My", "Erodibility K of stream power E = K·A^m·S^n − E_c (A in km², S in m/m, E in km/My). For m = 0.5, K = 1 is 1e−6/yr in SI (typical 1e−7…1e−5: Stock & Montgomery 1999).";
+        erodibility_per_my: f64 = 1.0, 0.0..=1000.0, "km^(1−2m)/My", "Erodibility K of stream power E = K·A^m·S^n − E_c (A in km², S in m/m, E in km/My). For m = 0.5, K = 1 is 1e−6/yr in SI (typical 1e−7…1e−5: Stock & Montgomery 1999).";
         area_exponent: f64 = 0.5, 0.0..=2.0, "", "Exponent m of drainage area (m/n ≈ 0.5: Whipple & Tucker 1999).";
         slope_exponent: f64 = 1.0, 0.25..=4.0, "", "Exponent n of slope.";
         incision_threshold_mm_per_yr: f64 = 0.3, 0.0..=100.0, "mm/yr", "Incision threshold E_c: old ranges stop eroding once their stream power falls under it, so they persist (Baldwin, Whipple & Tucker 2003; Tucker & Bras 2000).";
@@ -296,8 +296,8 @@ define_params! {
         slope_gradient: f64 = 0.052, 0.001..=1.0, "m/m", "Gradient of the continental slope (3°, DESIGN §7).";
         slope_base_depth_km: f64 = 2.5, 0.1..=10.0, "km", "Depth of the foot of the continental slope, where the rise begins.";
         rise_gradient: f64 = 0.0087, 0.0..=1.0, "m/m", "Gradient of the continental rise (0.5°).";
-        pelagic_rate_m_per_my: f64 = 10.0, 0.0..=1000.0, "m/My", "Pelagic sediment (plankton shells, dust) settling on the sea floor, which raises it by (ρ_m − ρ_s)/(ρ_m − ρ_w) of the layer (typical 1–10 m/My, more above the carbonate compensation depth).";
-        pelagic_max_age_my: f64 = 150.0, 0.0..=10000.0, "My", "Pelagic sediment settles on sea floor younger than this (old floor lies below the carbonate compensation depth, where little settles), which bounds the layer to rate × age.";
+        pelagic_rate_m_per_my: f64 = 14.0, 0.0..=1000.0, "m/My", "Pelagic sediment (plankton shells, dust) settling on the sea floor, which raises it by (ρ_m − ρ_s)/(ρ_m − ρ_w) of the layer (typical 1–10 m/My, more above the carbonate compensation depth).";
+        pelagic_max_age_my: f64 = 300.0, 0.0..=10000.0, "My", "Pelagic sediment settles on sea floor younger than this (old floor lies below the carbonate compensation depth, where little settles), which bounds the layer to rate × age.";
     }
     /// Plate rifting.
     [rifting] Rifting {
@@ -927,7 +927,7 @@ mod tests {
     #[test]
     fn schema_is_consistent() {
         let schema = Params::schema();
-        assert_eq!(schema.len(), 49);
+        assert_eq!(schema.len(), 82);
         assert_eq!(schema.len(), BOUNDS.len());
         let mut seen = HashSet::new();
         for (spec, (lo, hi)) in schema.iter().zip(BOUNDS) {

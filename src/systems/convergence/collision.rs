@@ -273,7 +273,7 @@ pub fn collision_uplift(world: &mut World) {
         let done = run_or_record(g, |g| {
             g.sync_crust(&crust, crust_tick)?;
             crate::gpu::collision_uplift::collision_uplift_gpu(g, &mesh.positions, &surges)?;
-            g.note_device_write(crate::gpu::collision_uplift::WRITES, &mut crust)
+            g.note_device_write(crate::gpu::collision_uplift::writes(isostatic), &mut crust)
         });
         synced = done;
         if !done {

@@ -125,7 +125,7 @@ pub fn subduction_uplift_cpu(
                     }
                 }
             }
-    });
+        });
 }
 
 /// Subduction uplift on overriding plates, fold directions, Andean orogeny, and trenches on
@@ -155,12 +155,14 @@ pub fn subduction_uplift(
                 Some(field_tick),
             )?;
             // The host copy is pulled lazily, by the next CPU reader (see gpu::FieldMask).
-            g.note_device_write(
+            // Isostatic relief thickens the crust; the paper's raises the elevation.
+            let relief = if k.isostatic {
+                FieldMask::THICKNESS
+            } else {
                 FieldMask::ELEVATION
-                    | FieldMask::THICKNESS
-                    | FieldMask::OROGENY
-                    | FieldMask::OROGENY_AGE
-                    | FieldMask::FOLD_DIR,
+            };
+            g.note_device_write(
+                relief | FieldMask::OROGENY | FieldMask::OROGENY_AGE | FieldMask::FOLD_DIR,
                 crust.bypass_change_detection(),
             )
         });

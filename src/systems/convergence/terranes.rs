@@ -78,7 +78,11 @@ pub fn close_trapped_ocean(world: &mut World) {
     // type (later rings read the samples filled before them), then the written samples go into
     // the crust as a declared write of elevation, crust type and thickness (on the GPU backend
     // those three fields go up, 9 B/sample, instead of a pull of every field and a full upload).
-    if !crate::gpu::sync_crust_to_host_or_record(world, crate::gpu::FieldMask::ELEVATION) {
+    // (The thickness too: a welded sample takes its neighbours'.)
+    if !crate::gpu::sync_crust_to_host_or_record(
+        world,
+        crate::gpu::FieldMask::ELEVATION | crate::gpu::FieldMask::THICKNESS,
+    ) {
         return;
     }
     let fallback = world.resource::<Params>().init.continental_thickness_km as f32;

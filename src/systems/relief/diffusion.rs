@@ -91,7 +91,9 @@ pub fn diffuse_land(
     let substeps = ((dt_my * max_rate / 0.5).ceil() as u32).clamp(1, 10_000);
     let dts = dt_my / substeps as f64;
     scratch.land.clear();
-    scratch.land.extend((0..n as u32).filter(|&i| !ocean[i as usize]));
+    scratch
+        .land
+        .extend((0..n as u32).filter(|&i| !ocean[i as usize]));
     scratch.coast.clear();
     for &i in &scratch.land {
         for &j in g.neighbors_of(i as usize) {
@@ -113,31 +115,35 @@ pub fn diffuse_land(
     const CH: usize = 8192;
     for _ in 0..substeps {
         let h = &scratch.h;
-        scratch.next.par_chunks_mut(CH).enumerate().for_each(|(c, out)| {
-            let base = c * CH;
-            for k in 0..out.len() {
-                let i = base + k;
-                if ocean[i] {
-                    continue;
+        scratch
+            .next
+            .par_chunks_mut(CH)
+            .enumerate()
+            .for_each(|(c, out)| {
+                let base = c * CH;
+                for k in 0..out.len() {
+                    let i = base + k;
+                    if ocean[i] {
+                        continue;
+                    }
+                    let hi = h[i];
+                    if g.area_km2[i] <= 0.0 {
+                        out[k] = hi;
+                        continue;
+                    }
+                    let mut flux = 0.0; // km³/My into i
+                    for e in g.edges(i) {
+                        let j = g.neighbors[e] as usize;
+                        let w = g.edge_weight[e] as f64;
+                        flux += if !ocean[j] {
+                            w * (h[j] - hi)
+                        } else {
+                            -w * hi.max(0.0)
+                        };
+                    }
+                    out[k] = hi + dts * kappa * flux / g.area_km2[i];
                 }
-                let hi = h[i];
-                if g.area_km2[i] <= 0.0 {
-                    out[k] = hi;
-                    continue;
-                }
-                let mut flux = 0.0; // km³/My into i
-                for e in g.edges(i) {
-                    let j = g.neighbors[e] as usize;
-                    let w = g.edge_weight[e] as f64;
-                    flux += if !ocean[j] {
-                        w * (h[j] - hi)
-                    } else {
-                        -w * hi.max(0.0)
-                    };
-                }
-                out[k] = hi + dts * kappa * flux / g.area_km2[i];
-            }
-        });
+            });
         // Coastal outflow received by each ocean sample (gather: deterministic).
         scratch
             .receipts

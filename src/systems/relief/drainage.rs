@@ -272,8 +272,10 @@ impl Drainage {
                         if !oc[i] {
                             let hi = h[i];
                             let mut best = 0.0f32;
-                            let (a, b) =
-                                (g.neighbor_start[i] as usize, g.neighbor_start[i + 1] as usize);
+                            let (a, b) = (
+                                g.neighbor_start[i] as usize,
+                                g.neighbor_start[i + 1] as usize,
+                            );
                             let (nb, inv) = (&g.neighbors[a..b], &g.inv_edge_km[a..b]);
                             for k in 0..nb.len() {
                                 // inv = 0 for degenerate edges: slope 0, never chosen.
@@ -336,7 +338,11 @@ impl Drainage {
                 }
                 let r0 = self.receiver[i] as usize;
                 let level = |j: usize| -> f32 {
-                    if self.mark[j] == done { self.water_level_km[j] } else { self.h[j] }
+                    if self.mark[j] == done {
+                        self.water_level_km[j]
+                    } else {
+                        self.h[j]
+                    }
                 };
                 if r0 != i && level(r0) < li {
                     continue;
@@ -405,7 +411,10 @@ impl Drainage {
         while head < self.stack.len() {
             let i = self.stack[head] as usize;
             head += 1;
-            let (a, b) = (self.donor_start[i] as usize, self.donor_start[i + 1] as usize);
+            let (a, b) = (
+                self.donor_start[i] as usize,
+                self.donor_start[i + 1] as usize,
+            );
             self.stack.extend_from_slice(&self.donors[a..b]);
         }
         self.timings_ms[3] = lap();

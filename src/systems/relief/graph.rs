@@ -95,7 +95,14 @@ impl ReliefGraph {
                 })
             })
             .collect();
-        let mut edge_weight = vec![if triangles.is_some() { 0.0 } else { LATTICE_WEIGHT }; nbrs.len()];
+        let mut edge_weight = vec![
+            if triangles.is_some() {
+                0.0
+            } else {
+                LATTICE_WEIGHT
+            };
+            nbrs.len()
+        ];
         if let Some(tris) = triangles {
             let find = |i: usize, j: u32| -> Option<usize> {
                 let (a, b) = (start[i] as usize, start[i + 1] as usize);
@@ -139,7 +146,10 @@ impl ReliefGraph {
         } else {
             total / edge_km.len() as f64
         };
-        let inv_edge_km = edge_km.iter().map(|&d| if d > 0.0 { 1.0 / d } else { 0.0 }).collect();
+        let inv_edge_km = edge_km
+            .iter()
+            .map(|&d| if d > 0.0 { 1.0 / d } else { 0.0 })
+            .collect();
         Self {
             inv_edge_km,
             neighbor_start: start,

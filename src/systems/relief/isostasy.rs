@@ -155,7 +155,11 @@ pub enum AgeDepthLaw {
 /// Ocean depth (km, positive down) of sea floor `age_my` old, plus `ridge_offset_km` (use it to
 /// move the ridge to the observed −2.7…−3.0 km; 0 keeps the published law).
 pub fn ocean_depth_km(age_my: f64, law: AgeDepthLaw, ridge_offset_km: f64) -> f64 {
-    let t = if age_my.is_finite() { age_my.max(0.0) } else { 0.0 };
+    let t = if age_my.is_finite() {
+        age_my.max(0.0)
+    } else {
+        0.0
+    };
     let d = match law {
         AgeDepthLaw::Gdh1 => {
             if t < 20.0 {
@@ -199,7 +203,11 @@ impl AgeDepthTable {
     /// Depth (km, positive down) at `age_my` (clamped to 0..400 My; NaN → 0).
     #[inline]
     pub fn depth_km(&self, age_my: f64) -> f64 {
-        let t = if age_my.is_finite() { age_my.clamp(0.0, Self::MAX_AGE) } else { 0.0 };
+        let t = if age_my.is_finite() {
+            age_my.clamp(0.0, Self::MAX_AGE)
+        } else {
+            0.0
+        };
         let x = t / Self::STEP;
         let k = (x as usize).min(self.depth.len() - 2);
         let f = x - k as f64;
@@ -215,7 +223,11 @@ pub fn ocean_elevation_km(
     ridge_offset_km: f64,
     p: &IsostasyParams,
 ) -> f64 {
-    let s = if sediment_km.is_finite() { sediment_km.max(0.0) } else { 0.0 };
+    let s = if sediment_km.is_finite() {
+        sediment_km.max(0.0)
+    } else {
+        0.0
+    };
     -ocean_depth_km(age_my, law, ridge_offset_km) + s * p.sediment_gain()
 }
 
@@ -258,7 +270,11 @@ fn mean_sq(edge_km: &[f32]) -> f64 {
     if edge_km.is_empty() {
         0.0
     } else {
-        edge_km.iter().map(|&d| (d as f64) * (d as f64)).sum::<f64>() / edge_km.len() as f64
+        edge_km
+            .iter()
+            .map(|&d| (d as f64) * (d as f64))
+            .sum::<f64>()
+            / edge_km.len() as f64
     }
 }
 
@@ -272,9 +288,17 @@ impl RegionalIsostasy {
     /// `positions` (the graph's samples), built when the fine graph would need more than
     /// [`MAX_FINE_PASSES`] passes. One-off cost ~0.3 s at 500k samples. If `p`'s elastic
     /// thickness changes later, the fine passes are used instead.
-    pub fn with_coarse_level(positions: &[glam::DVec3], g: &ReliefGraph, p: &IsostasyParams) -> Self {
+    pub fn with_coarse_level(
+        positions: &[glam::DVec3],
+        g: &ReliefGraph,
+        p: &IsostasyParams,
+    ) -> Self {
         let mut s = Self::new();
-        let sigma = if p.elastic_thickness_km > 0.0 { p.regional_sigma_km() } else { 0.0 };
+        let sigma = if p.elastic_thickness_km > 0.0 {
+            p.regional_sigma_km()
+        } else {
+            0.0
+        };
         let (fine_passes, _) = s.passes_for(g, sigma);
         if fine_passes > MAX_FINE_PASSES && positions.len() == g.len() {
             s.coarse = CoarseLevel::build(positions, g, sigma);
@@ -349,9 +373,17 @@ impl RegionalIsostasy {
         self.next.resize(n, 0.0);
         let root_of = |i: usize| -> f32 {
             let t = thickness_km[i] as f64;
-            if continental[i] && t.is_finite() { ((t - t0) * c) as f32 } else { 0.0 }
+            if continental[i] && t.is_finite() {
+                ((t - t0) * c) as f32
+            } else {
+                0.0
+            }
         };
-        let sigma = if p.elastic_thickness_km > 0.0 { p.regional_sigma_km() } else { 0.0 };
+        let sigma = if p.elastic_thickness_km > 0.0 {
+            p.regional_sigma_km()
+        } else {
+            0.0
+        };
         let mut passes = 0;
         let use_coarse = matches!(&self.coarse, Some(cl) if cl.n_fine == n && (cl.sigma_km - sigma).abs() < 1e-9);
         if sigma > 0.0 && use_coarse {
@@ -439,14 +471,22 @@ impl CoarseLevel {
         dir.sort_unstable();
         let find = |a: u32, b: u32| -> u32 {
             let key = ((a as u64) << 32) | b as u64;
-            dir.binary_search_by(|e| e.0.cmp(&key)).map(|k| dir[k].1).unwrap_or(u32::MAX)
+            dir.binary_search_by(|e| e.0.cmp(&key))
+                .map(|k| dir[k].1)
+                .unwrap_or(u32::MAX)
         };
         let adj: Vec<[u32; 3]> = tris
             .iter()
             .map(|t| [find(t[1], t[0]), find(t[2], t[1]), find(t[0], t[2])])
             .collect();
         let cp = &cm.positions;
-        let tri_of = |t: usize| (cp[tris[t][0] as usize], cp[tris[t][1] as usize], cp[tris[t][2] as usize]);
+        let tri_of = |t: usize| {
+            (
+                cp[tris[t][0] as usize],
+                cp[tris[t][1] as usize],
+                cp[tris[t][2] as usize],
+            )
+        };
         // Walk-locate every fine sample (fine samples are Morton-sorted, so walks are short).
         let mut p_idx = Vec::with_capacity(n);
         let mut p_w = Vec::with_capacity(n);
@@ -511,14 +551,23 @@ impl CoarseLevel {
         let mut coarse_edges = Vec::with_capacity(cm.neighbors.len());
         for i in 0..nc {
             for &j in cm.neighbors_of(i) {
-                coarse_edges.push(crate::geometry::angle_between(cp[i], cp[j as usize]) as f32 * r as f32);
+                coarse_edges
+                    .push(crate::geometry::angle_between(cp[i], cp[j as usize]) as f32 * r as f32);
             }
         }
         let msq = mean_sq(&coarse_edges);
         let remaining = (sigma_km * sigma_km - msq / 3.0).max(0.0);
         let per_pass = 0.5 * msq;
-        let passes = if remaining > 0.0 { (remaining / per_pass).ceil() as u32 } else { 0 };
-        let beta = if passes > 0 { (remaining / (passes as f64 * per_pass)) as f32 } else { 0.0 };
+        let passes = if remaining > 0.0 {
+            (remaining / per_pass).ceil() as u32
+        } else {
+            0
+        };
+        let beta = if passes > 0 {
+            (remaining / (passes as f64 * per_pass)) as f32
+        } else {
+            0.0
+        };
         let mut level = Self {
             sigma_km,
             n_fine: n,
@@ -557,26 +606,34 @@ impl CoarseLevel {
     fn restrict_and_smooth<F: Fn(usize) -> f32 + Sync>(&mut self, f: &F) {
         {
             let (rs, rf, rw) = (&self.r_start, &self.r_fine, &self.r_w);
-            self.m.par_iter_mut().enumerate().with_min_len(2048).for_each(|(c, m)| {
-                let mut sm = 0.0f32;
-                for k in rs[c] as usize..rs[c + 1] as usize {
-                    sm += rw[k] * f(rf[k] as usize);
-                }
-                *m = sm;
-            });
+            self.m
+                .par_iter_mut()
+                .enumerate()
+                .with_min_len(2048)
+                .for_each(|(c, m)| {
+                    let mut sm = 0.0f32;
+                    for k in rs[c] as usize..rs[c + 1] as usize {
+                        sm += rw[k] * f(rf[k] as usize);
+                    }
+                    *m = sm;
+                });
         }
         let beta = self.beta;
         for _ in 0..self.passes {
             let (m, cs, cn) = (&self.m, &self.c_start, &self.c_nbrs);
-            self.m2.par_iter_mut().enumerate().with_min_len(2048).for_each(|(c, m2)| {
-                let (s, e) = (cs[c] as usize, cs[c + 1] as usize);
-                let mut sm = 0.0f32;
-                for &j in &cn[s..e] {
-                    sm += m[j as usize];
-                }
-                let k = (e - s).max(1) as f32;
-                *m2 = m[c] + beta * (sm / k - m[c]);
-            });
+            self.m2
+                .par_iter_mut()
+                .enumerate()
+                .with_min_len(2048)
+                .for_each(|(c, m2)| {
+                    let (s, e) = (cs[c] as usize, cs[c + 1] as usize);
+                    let mut sm = 0.0f32;
+                    for &j in &cn[s..e] {
+                        sm += m[j as usize];
+                    }
+                    let k = (e - s).max(1) as f32;
+                    *m2 = m[c] + beta * (sm / k - m[c]);
+                });
             std::mem::swap(&mut self.m, &mut self.m2);
         }
     }
@@ -589,7 +646,9 @@ impl CoarseLevel {
             let base = ch * 8192;
             for k in 0..o.len() {
                 let (ids, ws) = (pi[base + k], pw[base + k]);
-                o[k] = ws[0] * m[ids[0] as usize] + ws[1] * m[ids[1] as usize] + ws[2] * m[ids[2] as usize];
+                o[k] = ws[0] * m[ids[0] as usize]
+                    + ws[1] * m[ids[1] as usize]
+                    + ws[2] * m[ids[2] as usize];
             }
         });
         self.passes

@@ -198,6 +198,45 @@ fn pull(crust: &mut ResMut<Crust>, gpu: &mut Option<ResMut<GpuContext>>, mask: F
     }
 }
 
+/// On the GPU backend, before a system that reads `reads` writes `writes` of the host crust:
+/// pulls what it reads, and tells whether the write can be declared (the device is in sync
+/// otherwise, so only `writes` go up afterwards, in [`after_write`]); when it cannot, every
+/// field the device holds newer comes down first (and the next kernel uploads the whole crust).
+/// `None` when a pull failed (the step stops with it).
+fn before_write(
+    crust: &mut ResMut<Crust>,
+    gpu: &mut Option<ResMut<GpuContext>>,
+    reads: FieldMask,
+    writes: FieldMask,
+) -> Option<bool> {
+    let Some(g) = gpu.as_mut() else {
+        return Some(false);
+    };
+    if !pull_or_record(g, crust, reads | writes) {
+        return None;
+    }
+    let declared = g.can_declare_host_write(writes, crust.len(), crust.last_changed());
+    if !declared && !pull_or_record(g, crust, FieldMask::ALL) {
+        return None;
+    }
+    Some(declared)
+}
+
+/// After a declared host write of `writes` (see [`before_write`]): uploads those fields.
+fn after_write(
+    crust: &ResMut<Crust>,
+    gpu: &mut Option<ResMut<GpuContext>>,
+    writes: FieldMask,
+    declared: bool,
+) {
+    if declared
+        && let Some(g) = gpu.as_mut()
+        && let Err(e) = g.note_host_write(crust, writes, crust.last_changed())
+    {
+        g.record_failure(e);
+    }
+}
+
 /// Builds the drainage network of the current surface (phenomenon `drainage`).
 pub fn build_drainage(
     params: Res<Params>,
@@ -252,9 +291,10 @@ pub fn erode_rivers(
     if !network.built || network.drainage.receiver.len() != mesh.len() {
         return;
     }
-    if !pull(&mut crust, &mut gpu, FieldMask::ALL) {
+    const WRITES: FieldMask = FieldMask(FieldMask::ELEVATION.0 | FieldMask::THICKNESS.0);
+    let Some(declared) = before_write(&mut crust, &mut gpu, FieldMask::NONE, WRITES) else {
         return;
-    }
+    };
     let dt = params.time.time_step_my;
     let spl = stream_power_params(&params);
     let kappa = params.rivers.hillslope_diffusivity_km2_per_my;
@@ -268,7 +308,8 @@ pub fn erode_rivers(
     let Some(g) = state.graph.as_ref() else {
         return;
     };
-    let crust = &mut *crust;
+    let mut crust_res = crust;
+    let crust = &mut *crust_res;
     flux.incised_km3 = stream_power_erode(
         g,
         &network.drainage,
@@ -325,6 +366,7 @@ pub fn erode_rivers(
         .for_each(|(t, (&e, &d))| *t += d - e);
     flux.total_eroded_km3 += flux.eroded_km3();
     flux.total_deposited_km3 += flux.diffusion.raised_km3;
+    after_write(&crust_res, &mut gpu, WRITES, declared);
 }
 
 /// Lays down what the rivers and slopes carried (phenomenon `sediment`): in lakes, on the shelf,
@@ -342,14 +384,16 @@ pub fn deposit_sediment(
     if !network.built || network.drainage.receiver.len() != n || flux.eroded_km.len() != n {
         return;
     }
-    if !pull(&mut crust, &mut gpu, FieldMask::ALL) {
+    let reads = FieldMask(FieldMask::ELEVATION.0 | FieldMask::AGE.0);
+    let Some(declared) = before_write(&mut crust, &mut gpu, reads, FieldMask::THICKNESS) else {
         return;
-    }
+    };
     let iso = isostasy_params(&params);
     let sp = sediment_params(&params);
     let state = &mut *state;
     let flux = &mut *flux;
-    let crust = &mut *crust;
+    let mut crust_res = crust;
+    let crust = &mut *crust_res;
     // Surface rise per km deposited: oceanic crust is compensated locally (the sea floor follows
     // the age–depth law), continental crust regionally, so a single sample stands nearly
     // uncompensated in the step it receives its load (it sinks by the next steps' isostasy).
@@ -409,6 +453,7 @@ pub fn deposit_sediment(
     } else {
         flux.pelagic_km3 = 0.0;
     }
+    after_write(&crust_res, &mut gpu, FieldMask::THICKNESS, declared);
 }
 
 /// Trench depth (km below the floor beside it) of a subducting ocean sample whose distance to
@@ -419,6 +464,14 @@ pub fn deposit_sediment(
 pub fn trench_profile_km(d_km: f64, depth_km: f64, width_km: f64) -> f64 {
     let x = 1.0 - d_km.abs() / width_km.max(1e-9);
     if x <= 0.0 { 0.0 } else { depth_km * x * x }
+}
+
+/// [`trench_profile_km`] on a mesh of mean spacing `spacing_km`: full depth within half a
+/// spacing of the front, so that a trench narrower than a sample still has its deepest sample
+/// (at 100,000 samples the nearest sample can lie 35 km from the front).
+pub fn trench_depth_on_mesh_km(d_km: f64, depth_km: f64, width_km: f64, spacing_km: f64) -> f64 {
+    let d = (d_km.abs() - 0.5 * spacing_km).max(0.0);
+    trench_profile_km(d, depth_km, width_km)
 }
 
 /// The elevation of every sample from the crust (phenomenon `isostasy`): continents by regional
@@ -434,12 +487,14 @@ pub fn apply_isostasy(
     field: Res<ConvergenceField>,
     mut gpu: Option<ResMut<GpuContext>>,
 ) {
-    if !pull(&mut crust, &mut gpu, FieldMask::ALL) {
+    let reads = FieldMask(FieldMask::THICKNESS.0 | FieldMask::AGE.0);
+    let Some(declared) = before_write(&mut crust, &mut gpu, reads, FieldMask::ELEVATION) else {
         return;
-    }
+    };
     let n = mesh.len();
     let state = &mut *state;
-    let crust = &mut *crust;
+    let mut crust_res = crust;
+    let crust = &mut *crust_res;
     let iso = isostasy_params(&params);
     let ip = &params.isostasy;
     if ensure_graph(&mut state.graph, &mesh) {
@@ -489,6 +544,7 @@ pub fn apply_isostasy(
     state.trench_km.resize(n, 0.0);
     if field.subducting_point.len() == n && !fp.is_empty() {
         let (depth, width) = (ip.trench_depth_km, ip.trench_width_km);
+        let spacing = mesh.mean_spacing_rad() * mesh.radius_km;
         state
             .trench_km
             .par_iter_mut()
@@ -499,7 +555,7 @@ pub fn apply_isostasy(
             .for_each(|(((t, &sp), &sd), &ct)| {
                 if sp != NONE && ct == CrustType::Oceanic && fp.active[sp as usize] {
                     let d = sd as f64 - fp.converged_km[sp as usize] as f64;
-                    *t = trench_profile_km(d, depth, width) as f32;
+                    *t = trench_depth_on_mesh_km(d, depth, width, spacing) as f32;
                 }
             });
     }
@@ -525,4 +581,5 @@ pub fn apply_isostasy(
                     - trench[i] as f64) as f32;
             }
         });
+    after_write(&crust_res, &mut gpu, FieldMask::ELEVATION, declared);
 }

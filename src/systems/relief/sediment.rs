@@ -296,7 +296,10 @@ impl SedimentRouter {
                 let a = g.area_km2[j].max(1e-12);
                 let add = ff(j) * v / a;
                 let zj = z_of(j) + ff(j) * self.dep[j] / a;
-                if self.state[j] == 0 && add <= FAST_PATH_KM && zj + add <= p.shelf_top_km(half as f64) + FAST_PATH_KM {
+                if self.state[j] == 0
+                    && add <= FAST_PATH_KM
+                    && zj + add <= p.shelf_top_km(half as f64) + FAST_PATH_KM
+                {
                     self.touch(j);
                     self.dep[j] += v;
                     continue;
@@ -402,7 +405,11 @@ impl SedimentRouter {
             let mut given = 0.0;
             for k in 0..count {
                 let (j, s, d) = self.lower[k];
-                let v = if k + 1 == count { q - given } else { q * s / total };
+                let v = if k + 1 == count {
+                    q - given
+                } else {
+                    q * s / total
+                };
                 given += v;
                 self.send(j as usize, v, (di + d) as f32, elevation_km);
             }
@@ -650,14 +657,21 @@ impl SedimentRouter {
         shares.clear();
         shares.extend(self.pond.iter().map(|&j| {
             let j = j as usize;
-            (j, (level - cur(&self.dep, j)).max(0.0) * g.area_km2[j] / ff(j))
+            (
+                j,
+                (level - cur(&self.dep, j)).max(0.0) * g.area_km2[j] / ff(j),
+            )
         }));
         let wsum: f64 = shares.iter().map(|s| s.1).sum();
         if wsum > 0.0 && used > 0.0 {
             let mut given = 0.0;
             let last = shares.len() - 1;
             for (k, &(j, w)) in shares.iter().enumerate() {
-                let v = if k == last { used - given } else { used * w / wsum };
+                let v = if k == last {
+                    used - given
+                } else {
+                    used * w / wsum
+                };
                 given += v;
                 self.touch(j);
                 self.dep[j] += v;

@@ -70,7 +70,9 @@ impl Default for StreamPowerParams {
 impl StreamPowerParams {
     /// Multiplier applied to drainage areas for graph `g` (1 when the correction is off).
     pub fn area_scale(&self, g: &ReliefGraph) -> f64 {
-        if self.spacing_exponent == 0.0 || g.mean_spacing_km <= 0.0 || self.reference_spacing_km <= 0.0
+        if self.spacing_exponent == 0.0
+            || g.mean_spacing_km <= 0.0
+            || self.reference_spacing_km <= 0.0
         {
             1.0
         } else {
@@ -215,7 +217,12 @@ pub fn stream_power_erode(
 /// Steady-state slope of the stream-power law for uplift rate `u` (km/My): the slope at which
 /// erosion balances uplift, S = ((U + E_c)/(K·(s·A)^m))^(1/n) (m/m), A in km², with
 /// s = [`StreamPowerParams::area_scale`] of the graph (pass 1.0 when the correction is off).
-pub fn steady_state_slope(p: &StreamPowerParams, u_km_per_my: f64, area_km2: f64, area_scale: f64) -> f64 {
+pub fn steady_state_slope(
+    p: &StreamPowerParams,
+    u_km_per_my: f64,
+    area_km2: f64,
+    area_scale: f64,
+) -> f64 {
     ((u_km_per_my + p.threshold_km_per_my.max(0.0)) / (p.k * (area_scale * area_km2).powf(p.m)))
         .powf(1.0 / p.n)
 }

@@ -8,7 +8,6 @@ use rayon::prelude::*;
 
 use super::*;
 use crate::geometry::SphereMesh;
-use crate::resources::params::Params;
 use crate::resources::{Crust, CrustType, NO_PLATE, PlateTable};
 
 /// Interpolates every field of `old` at the sources into `next` (gap samples get zeros and
@@ -151,11 +150,9 @@ pub fn interpolate(
 /// outward instead of vanishing. Deterministic (plates by id, samples in index order).
 pub fn displace_overridden_continents(
     mesh: &SphereMesh,
-    params: &Params,
     sources: &[SampleSource],
     next: &mut Crust,
 ) {
-    let thickness = params.init.continental_thickness_km as f32;
     let mut by_plate: std::collections::BTreeMap<u32, Vec<u32>> = std::collections::BTreeMap::new();
     for (j, src) in sources.iter().enumerate() {
         if src.continental_lost && next.plate[j] != NO_PLATE {
@@ -180,7 +177,6 @@ pub fn displace_overridden_continents(
             starts.len(),
             Spread::Within(plate),
             &mut visited,
-            thickness,
         );
         moved += starts.len() - debt;
         if debt > 0 {
@@ -192,7 +188,6 @@ pub fn displace_overridden_continents(
                 debt,
                 Spread::Claim(plate),
                 &mut visited,
-                thickness,
             );
             spilled += debt - left;
             moved += debt - left;
@@ -200,15 +195,8 @@ pub fn displace_overridden_continents(
                 // Landlocked (its continent borders no ocean at all): as a last resort the
                 // nearest ocean bordering any continent turns continental, keeping its plate.
                 visited.iter_mut().for_each(|v| *v = false);
-                let rest = spread_continent(
-                    mesh,
-                    next,
-                    &starts,
-                    left,
-                    Spread::Anywhere,
-                    &mut visited,
-                    thickness,
-                );
+                let rest =
+                    spread_continent(mesh, next, &starts, left, Spread::Anywhere, &mut visited);
                 spilled += left - rest;
                 moved += left - rest;
             }
@@ -243,7 +231,6 @@ fn spread_continent(
     mut debt: usize,
     spread: Spread,
     visited: &mut [bool],
-    thickness: f32,
 ) -> usize {
     let plate = match spread {
         Spread::Within(p) => Some(p),

@@ -203,7 +203,7 @@ pub fn resample_interpolate(
     if let Some(timings) = timings.as_mut() {
         timings.record("resample_interpolate", t.elapsed());
     }
-    displace_overridden_continents(&mesh, &params, &work.sources, &mut work.next);
+    displace_overridden_continents(&mesh, &work.sources, &mut work.next);
     lap("interpolate", &mut t);
     work.gaps = gaps_from_nearest(&mesh, &work.sources, &mut work.next);
     lap("nearest plates of gaps", &mut t);

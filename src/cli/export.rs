@@ -46,8 +46,8 @@ pub(crate) struct ExtraExports {
     /// Width of the global amplified heightmap (height is half); default: --width.
     #[arg(long, value_name = "W")]
     pub(crate) amplified_width: Option<u32>,
-    /// Float32 GeoTIFFs (EPSG:4326) of every crust layer, and of the amplified elevation with
-    /// --amplified.
+    /// Float32 GeoTIFFs (EPSG:4326) of every crust layer, flow accumulation and drainage basins,
+    /// and of the amplified elevation with --amplified.
     #[arg(long)]
     pub(crate) geotiff: bool,
     /// Export a region instead of the globe: LAT0,LON0,LAT1,LON1 in degrees.
@@ -129,6 +129,7 @@ pub(crate) fn write_extra_exports_on(
     use tectonic_planets::amplify::{Amplifier, AmplifyOptions};
     use tectonic_planets::io::export::{self, ElevationOutputs, GeoGrid};
     use tectonic_planets::io::gltf;
+    use tectonic_planets::io::rivers::RiverNetwork;
     let wants_amp = e.amplified || e.preview || e.gltf;
     if !(wants_amp || e.geotiff) {
         if e.region.is_some() || e.exemplars.is_some() {
@@ -149,6 +150,7 @@ pub(crate) fn write_extra_exports_on(
     };
     let radius_km = sim.params().planet.radius_km;
     let seed = sim.params().planet.seed;
+    let min_sea_area_km2 = sim.params().rivers.min_sea_area_km2;
     let view = sim.resampled_crust();
     let mesh = sim.mesh();
     let (grid, prefix) = match &e.region {
@@ -170,6 +172,15 @@ pub(crate) fn write_extra_exports_on(
             mesh, &view, &grid, out, prefix,
         )?);
         say(&format!("crust GeoTIFFs {}x{}", grid.width, grid.height), t);
+        let t = Instant::now();
+        let rivers = RiverNetwork::of(mesh, &view, min_sea_area_km2);
+        files.extend(export::export_drainage_layers(
+            mesh, &rivers, &grid, out, prefix,
+        )?);
+        say(
+            &format!("drainage GeoTIFFs {}x{}", grid.width, grid.height),
+            t,
+        );
     }
     if !wants_amp {
         return Ok(files);

@@ -43,8 +43,7 @@ const COORD_SCALE: f64 = 1e5;
 pub struct RiverNetwork {
     /// The network (receivers, areas, lakes, the sea mask).
     pub drainage: Drainage,
-    /// The outlet of every sample (its basin; see
-    /// [`basin_outlets`](crate::systems::relief::network::basin_outlets)).
+    /// The outlet of every sample (its basin; see [`basin_outlets`]).
     pub outlets: Vec<u32>,
     /// The river reaches above the threshold.
     pub reaches: Vec<Reach>,
@@ -60,8 +59,7 @@ impl RiverNetwork {
         Self::on_graph(&relief_graph(mesh), crust, min_sea_area_km2)
     }
 
-    /// [`Self::of`] on a sample graph already built (see
-    /// [`relief_graph`](crate::systems::relief::network::relief_graph)).
+    /// [`Self::of`] on a sample graph already built (see [`relief_graph`]).
     pub fn on_graph(g: &ReliefGraph, crust: &Crust, min_sea_area_km2: f64) -> Self {
         let drainage = network_of(g, crust, min_sea_area_km2);
         let min_area_km2 = river_threshold_km2(g.total_area_km2(), g.len());

@@ -153,10 +153,23 @@ fn generate_writes_maps_and_summary() {
         "crust_type.png",
         "elevation16.png",
         "elevation16.json",
+        "rivers.png",
+        "rivers.geojson",
+        "hypsometry.png",
         "summary.json",
     ] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }
+    let rivers: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("rivers.geojson")).unwrap())
+            .unwrap();
+    assert_eq!(rivers["type"], "FeatureCollection");
+    assert!(
+        !rivers["features"].as_array().unwrap().is_empty(),
+        "no rivers"
+    );
+    let img = image::open(dir.join("rivers.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (256, 128));
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["samples"], 20000);

@@ -9,6 +9,7 @@ use tectonic_planets::amplify::{Amplifier, AmplifyOptions};
 use tectonic_planets::geometry::SphereMesh;
 use tectonic_planets::io::export::{self, ElevationOutputs, GeoGrid};
 use tectonic_planets::io::gltf::{GltfOptions, elevation_colour, planet_glb};
+use tectonic_planets::io::rivers::RiverNetwork;
 use tectonic_planets::prelude::*;
 
 fn temp_dir(tag: &str) -> PathBuf {
@@ -129,6 +130,63 @@ fn gdal_reads_every_geotiff_with_epsg_4326_and_the_bounds() {
         t.values[(r * region.width + c) as usize],
         amp.elevation_m(region.direction(c, r))
     );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn drainage_geotiffs_hold_the_area_and_basins_that_follow_the_receivers() {
+    let (mesh, crust) = small_planet();
+    let net = RiverNetwork::of(&mesh, &crust, 250_000.0);
+    let d = &net.drainage;
+    // Every sample's basin is its receiver's.
+    for i in 0..mesh.len() {
+        let r = d.receiver[i] as usize;
+        assert_eq!(net.outlets[i], net.outlets[r], "sample {i}, receiver {r}");
+    }
+    let dir = temp_dir("drainage");
+    let grid = GeoGrid::global(360, 180).unwrap();
+    let files = export::export_drainage_layers(&mesh, &net, &grid, &dir, "").unwrap();
+    let names: Vec<_> = files.iter().filter_map(|f| f.file_name()).collect();
+    assert_eq!(names, ["flow_accumulation.tif", "drainage_basin.tif"]);
+    for f in &files {
+        check_gdal(f, 360, 180, &grid.bounds());
+        if let Some(info) = gdalinfo(f) {
+            assert_eq!(info["bands"].as_array().map(Vec::len), Some(1));
+        }
+    }
+    let read = |f: &Path| {
+        tectonic_planets::io::geotiff::read_single_band(&std::fs::read(f).unwrap()).unwrap()
+    };
+    let (area, basin) = (read(&files[0]), read(&files[1]));
+    assert_eq!((area.width, area.height), (360, 180));
+    assert_eq!((basin.width, basin.height), (360, 180));
+    let (mut land, mut river, mut basins) = (0, 0, std::collections::HashSet::new());
+    for row in 0..grid.height {
+        for col in 0..grid.width {
+            let k = (row * grid.width + col) as usize;
+            let loc = mesh.locate(grid.direction(col, row));
+            let s = mesh.triangles[loc.triangle as usize][loc.dominant_corner()] as usize;
+            if d.ocean[s] {
+                assert_eq!(
+                    (area.values[k], basin.values[k]),
+                    (0.0, -1.0),
+                    "pixel {col},{row}"
+                );
+                continue;
+            }
+            land += 1;
+            assert_eq!(area.values[k], d.area_km2[s] as f32, "pixel {col},{row}");
+            assert_eq!(basin.values[k], net.outlets[s] as f32, "pixel {col},{row}");
+            // The pixel's basin is its sample's receiver's.
+            let r = d.receiver[s] as usize;
+            assert_eq!(basin.values[k], net.outlets[r] as f32, "pixel {col},{row}");
+            basins.insert(basin.values[k].to_bits());
+            river += usize::from(f64::from(area.values[k]) > 10.0 * mesh.area_km2[s]);
+        }
+    }
+    assert!(land > 1000, "{land} land pixels");
+    assert!(river > 50, "{river} pixels drain more than ten samples");
+    assert!(basins.len() > 5, "{} basins", basins.len());
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -333,6 +391,8 @@ fn export_command_writes_the_requested_files_and_refuses_bad_flags() {
         "tile_crust_elevation.tif",
         "tile_plate.tif",
         "tile_orogeny_age.tif",
+        "tile_flow_accumulation.tif",
+        "tile_drainage_basin.tif",
         "tile_amplified_preview.png",
         "tile_crust_preview.png",
         "planet.glb",

@@ -47,8 +47,8 @@ pub(crate) struct ExtraExports {
     /// Width of the global amplified heightmap (height is half); default: --width.
     #[arg(long, value_name = "W")]
     pub(crate) amplified_width: Option<u32>,
-    /// Float32 GeoTIFFs (EPSG:4326) of every crust layer, and of the amplified elevation with
-    /// --amplified.
+    /// Float32 GeoTIFFs (EPSG:4326) of every crust layer, flow accumulation and drainage basins,
+    /// and of the amplified elevation with --amplified.
     #[arg(long)]
     pub(crate) geotiff: bool,
     /// Export a region instead of the globe: LAT0,LON0,LAT1,LON1 in degrees, from the south-west
@@ -291,6 +291,7 @@ pub(crate) fn write_extra_exports_on(
         prefix,
         exemplars,
     } = plan;
+    use tectonic_planets::io::rivers::RiverNetwork;
     let say = |what: &str, t: Instant| {
         if !quiet {
             eprintln!("  {what} in {:.2} s", t.elapsed().as_secs_f64());
@@ -298,6 +299,7 @@ pub(crate) fn write_extra_exports_on(
     };
     let radius_km = sim.params().planet.radius_km;
     let seed = sim.params().planet.seed;
+    let min_sea_area_km2 = sim.params().rivers.min_sea_area_km2;
     let view = sim.resampled_crust();
     let mesh = sim.mesh();
     let mut files = Vec::new();
@@ -307,6 +309,15 @@ pub(crate) fn write_extra_exports_on(
             mesh, &view, &grid, out, prefix,
         )?);
         say(&format!("crust GeoTIFFs {}x{}", grid.width, grid.height), t);
+        let t = Instant::now();
+        let rivers = RiverNetwork::of(mesh, &view, min_sea_area_km2);
+        files.extend(export::export_drainage_layers(
+            mesh, &rivers, &grid, out, prefix,
+        )?);
+        say(
+            &format!("drainage GeoTIFFs {}x{}", grid.width, grid.height),
+            t,
+        );
     }
     if !wants_amp {
         return Ok(files);

@@ -11,6 +11,7 @@ use tectonic_planets::Simulation;
 use tectonic_planets::commands::{Outcome, Script};
 use tectonic_planets::gpu::BackendChoice;
 use tectonic_planets::io::maps::{Raster, write_all_maps};
+use tectonic_planets::io::rivers::{RiverNetwork, write_rivers};
 use tectonic_planets::io::save::{self, CommandHistory, SaveError};
 use tectonic_planets::io::summary::{CrustSampler, summarize};
 
@@ -270,7 +271,8 @@ pub(crate) fn run_steps_with_progress(
     Ok(())
 }
 
-/// Writes the maps and summary of `sim` into `out`; returns the files written.
+/// Writes the maps, rivers (rivers.png, rivers.geojson), hypsometry.png and summary of `sim`
+/// into `out`; returns the files written.
 pub(crate) fn write_outputs(sim: &mut Simulation, out: &Path, width: u32) -> Result<Vec<PathBuf>> {
     prepare_out_dir(out)?;
     let view = sim.resampled_crust();
@@ -282,7 +284,10 @@ pub(crate) fn write_outputs(sim: &mut Simulation, out: &Path, width: u32) -> Res
         width,
         width / 2,
     )?;
-    let mut files = write_all_maps(&raster, out, sim.params().planet.radius_km)?;
+    let radius_km = sim.params().planet.radius_km;
+    let mut files = write_all_maps(&raster, out, radius_km)?;
+    let rivers = RiverNetwork::of(sim.mesh(), &view, sim.params().rivers.min_sea_area_km2);
+    files.extend(write_rivers(&raster, sim.mesh(), &rivers, out, radius_km)?);
     let summary = summarize(sim, &view);
     let hyps_path = out.join("hypsometry.png");
     tectonic_planets::io::hypsometry::write_hypsometry_png(&summary.hypsometry, &hyps_path, 900)?;

@@ -1,6 +1,6 @@
 //! Exports: global and regional grids on one geographic lattice, streamed in bands of rows into
-//! 16-bit PNG heightmaps and float32 GeoTIFFs (amplified elevation and every crust layer), and
-//! shaded previews.
+//! 16-bit PNG heightmaps and float32 GeoTIFFs (amplified elevation, every crust layer, flow
+//! accumulation and drainage basins), and shaded previews.
 //!
 //! Every grid is a window of a lattice fixed by its pixel size alone: pixel (I, J) covers
 //! longitudes `-180 + I·dx .. -180 + (I+1)·dx` and latitudes `90 − (J+1)·dy .. 90 − J·dy`, and
@@ -19,6 +19,7 @@ use crate::gpu::GpuContext;
 use crate::gpu::amplify::AmplifyGpu;
 use crate::io::geotiff::{GeoBounds, GeoTiffError, GeoTiffWriter};
 use crate::io::heightmap::{Heightmap16Writer, HeightmapError};
+use crate::io::rivers::RiverNetwork;
 use crate::resources::{Crust, Orogeny};
 
 /// Largest grid side accepted, pixels.
@@ -536,8 +537,73 @@ pub fn export_crust_layers(
     dir: &Path,
     prefix: &str,
 ) -> Result<Vec<PathBuf>, ExportError> {
+    let f = |q: DVec3, hint: &mut u32| crust_layers_at(mesh, crust, q, hint);
+    export_layers(&CRUST_LAYERS, &f, grid, dir, prefix)
+}
+
+/// The drainage layers exported as GeoTIFFs, with their file stems and descriptions.
+pub const DRAINAGE_LAYERS: [(&str, &str); 2] = [
+    (
+        "flow_accumulation",
+        "drainage area (flow accumulation), km2; 0 on the sea",
+    ),
+    (
+        "drainage_basin",
+        "drainage basin: index of the outlet sample (sea sample or endorheic sink) the water drains to; -1 on the sea",
+    ),
+];
+
+/// The drainage layers at unit direction `q`, from the nearest sample (the dominant corner):
+/// its drainage area in km² (0 on the sea) and its basin, the index of its outlet sample (−1 on
+/// the sea; exact as float32 up to 16,777,216 samples).
+pub fn drainage_layers_at(
+    mesh: &SphereMesh,
+    net: &RiverNetwork,
+    q: DVec3,
+    hint: &mut u32,
+) -> [f32; 2] {
+    let loc = crate::amplify::hinted_locate(mesh, q, *hint);
+    *hint = loc.triangle;
+    let t = mesh.triangles[loc.triangle as usize];
+    let s = t[loc.dominant_corner()] as usize;
+    let d = &net.drainage;
+    match (d.ocean.get(s), d.area_km2.get(s), net.outlets.get(s)) {
+        (Some(false), Some(&a), Some(&o)) => [a as f32, o as f32],
+        _ => [0.0, -1.0],
+    }
+}
+
+/// Streams the drainage layers of `net` (on `mesh`, world frame) over `grid` into
+/// `dir/<prefix><layer>.tif` (see [`DRAINAGE_LAYERS`]). Returns the files.
+pub fn export_drainage_layers(
+    mesh: &SphereMesh,
+    net: &RiverNetwork,
+    grid: &GeoGrid,
+    dir: &Path,
+    prefix: &str,
+) -> Result<Vec<PathBuf>, ExportError> {
+    if net.len() != mesh.len() {
+        return Err(ExportError::Invalid(format!(
+            "drainage network of {} samples on a mesh of {}",
+            net.len(),
+            mesh.len()
+        )));
+    }
+    let f = |q: DVec3, hint: &mut u32| drainage_layers_at(mesh, net, q, hint);
+    export_layers(&DRAINAGE_LAYERS, &f, grid, dir, prefix)
+}
+
+/// Streams `K` layers computed together by `f` over `grid` into `dir/<prefix><stem>.tif`, one
+/// float32 GeoTIFF per (stem, description) of `layers`. Returns the files.
+fn export_layers<const K: usize>(
+    layers: &[(&str, &str); K],
+    f: &(impl Fn(DVec3, &mut u32) -> [f32; K] + Sync),
+    grid: &GeoGrid,
+    dir: &Path,
+    prefix: &str,
+) -> Result<Vec<PathBuf>, ExportError> {
     let bounds = grid.bounds();
-    let mut writers = CRUST_LAYERS
+    let mut writers = layers
         .iter()
         .map(|(stem, desc)| {
             GeoTiffWriter::create(
@@ -549,17 +615,25 @@ pub fn export_crust_layers(
             )
         })
         .collect::<Result<Vec<_>, _>>()?;
+    /// One pixel's layers (arrays of any length have no `Default`).
+    #[derive(Clone)]
+    struct Px<const K: usize>([f32; K]);
+    impl<const K: usize> Default for Px<K> {
+        fn default() -> Self {
+            Self([0.0; K])
+        }
+    }
+    let g = |q: DVec3, hint: &mut u32| Px(f(q, hint));
     let mut band = Vec::new();
     let mut row = vec![0.0f32; grid.width as usize];
-    let f = |q: DVec3, hint: &mut u32| crust_layers_at(mesh, crust, q, hint);
     let mut row0 = 0;
     while row0 < grid.height {
         let rows = BAND_ROWS.min(grid.height - row0);
-        grid.band_hinted(row0, rows, &f, &mut band);
+        grid.band_hinted(row0, rows, &g, &mut band);
         for px in band.chunks(grid.width as usize) {
             for (k, w) in writers.iter_mut().enumerate() {
                 for (o, v) in row.iter_mut().zip(px) {
-                    *o = v[k];
+                    *o = v.0[k];
                 }
                 w.write_row(&row)?;
             }

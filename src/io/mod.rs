@@ -1,5 +1,5 @@
-//! Input and output: parameters (TOML), map rendering (PNG), run summaries (JSON), saves, and
-//! exports (16-bit heightmaps, GeoTIFF, glTF).
+//! Input and output: parameters (TOML), map rendering (PNG), rivers (PNG, GeoJSON), run
+//! summaries (JSON), saves, and exports (16-bit heightmaps, GeoTIFF, glTF).
 
 pub mod exemplars;
 pub mod export;
@@ -9,5 +9,6 @@ pub mod heightmap;
 pub mod hypsometry;
 pub mod maps;
 pub mod pending;
+pub mod rivers;
 pub mod save;
 pub mod summary;

@@ -1,5 +1,6 @@
 //! The 2D equirectangular map of the viewer: base layers (elevation with hypsometric tint and
-//! hillshade, plates, crust type, oceanic age, orogeny type and age, elevation Laplacian)
+//! hillshade, plates, crust type, oceanic age, orogeny type and age, elevation Laplacian,
+//! rivers and lakes, drainage basins, crust thickness)
 //! coloured from a [`Snapshot`], and vector layers (fold and ridge directions, plate velocity
 //! arrows, subduction fronts and terranes from their entities) painted on top.
 
@@ -11,6 +12,7 @@ use rayon::prelude::*;
 use crate::commands::LatLon;
 use crate::geometry::spherical::to_lat_lon_deg;
 use crate::io::maps::{MapSample, Raster, plate_colour};
+use crate::io::rivers;
 use crate::resources::{CrustType, Orogeny};
 
 use super::worker::Snapshot;
@@ -32,11 +34,17 @@ pub enum BaseLayer {
     OrogenyAge,
     /// Laplacian of the elevation (ridges bright, valleys dark).
     Laplacian,
+    /// Rivers and lakes over the elevation (the drainage network of the crust shown).
+    Rivers,
+    /// Drainage basins, one colour each (the land that drains to one outlet).
+    Basins,
+    /// Crust thickness.
+    Thickness,
 }
 
 impl BaseLayer {
     /// Every base layer, in menu order.
-    pub const ALL: [BaseLayer; 7] = [
+    pub const ALL: [BaseLayer; 10] = [
         Self::Elevation,
         Self::Plates,
         Self::CrustType,
@@ -44,6 +52,9 @@ impl BaseLayer {
         Self::OrogenyType,
         Self::OrogenyAge,
         Self::Laplacian,
+        Self::Rivers,
+        Self::Basins,
+        Self::Thickness,
     ];
     /// Menu label.
     pub fn label(self) -> &'static str {
@@ -55,6 +66,9 @@ impl BaseLayer {
             Self::OrogenyType => "Orogeny type",
             Self::OrogenyAge => "Orogeny age",
             Self::Laplacian => "Elevation Laplacian",
+            Self::Rivers => "Rivers",
+            Self::Basins => "Drainage basins",
+            Self::Thickness => "Crust thickness",
         }
     }
 }
@@ -62,7 +76,7 @@ impl BaseLayer {
 impl std::str::FromStr for BaseLayer {
     type Err = String;
     /// A layer by name (`elevation`, `plates`, `crust_type`, `oceanic_age`, `orogeny_type`,
-    /// `orogeny_age`, `laplacian`).
+    /// `orogeny_age`, `laplacian`, `rivers`, `basins`, `thickness`).
     fn from_str(s: &str) -> Result<Self, String> {
         let names = [
             "elevation",
@@ -72,6 +86,9 @@ impl std::str::FromStr for BaseLayer {
             "orogeny_type",
             "orogeny_age",
             "laplacian",
+            "rivers",
+            "basins",
+            "thickness",
         ];
         names
             .iter()
@@ -212,7 +229,66 @@ pub fn render_base(s: &Snapshot, layer: BaseLayer) -> ColorImage {
             })
         }
         BaseLayer::Laplacian => laplacian_image(s),
+        BaseLayer::Rivers => rivers_image(s),
+        BaseLayer::Basins => basins_image(s),
+        BaseLayer::Thickness => {
+            const STOPS: [(f32, [u8; 3]); 6] = [
+                (0.0, [10, 20, 60]),
+                (7.0, [40, 90, 170]),
+                (20.0, [70, 170, 170]),
+                (35.0, [225, 205, 120]),
+                (50.0, [215, 120, 50]),
+                (70.0, [130, 30, 40]),
+            ];
+            per_pixel(s, |i| {
+                lerp_colour(&STOPS, s.lookup.lerp(&s.crust.thickness_km, i))
+            })
+        }
     }
+}
+
+/// The elevation map with the lakes and rivers of the snapshot's drainage network (as
+/// rivers.png; see [`crate::io::rivers`]).
+fn rivers_image(s: &Snapshot) -> ColorImage {
+    let net = s.rivers();
+    let lk = &s.lookup;
+    let mut img = raster_of(s).elevation_image(s.radius_km);
+    if net.len() == s.positions.len() {
+        let lake: Vec<f32> = (0..net.len())
+            .map(|i| if net.is_lake(i) { 1.0 } else { 0.0 })
+            .collect();
+        let w = lk.width as usize;
+        rivers::paint_lakes(&mut img, |c, r| {
+            lk.lerp(&lake, r as usize * w + c as usize) >= 0.5
+        });
+        rivers::draw_rivers(&mut img, &s.positions, net);
+    }
+    rgb_to_color_image(img)
+}
+
+/// Colour of the sea on the basins map.
+const BASIN_SEA: Color32 = Color32::from_rgb(30, 52, 92);
+
+/// Every drainage basin in its own colour (a stable hash of its outlet), lakes in the lake
+/// colour, the sea dark.
+fn basins_image(s: &Snapshot) -> ColorImage {
+    let net = s.rivers();
+    if net.len() != s.positions.len() || net.outlets.len() != net.len() {
+        return per_pixel(s, |_| BASIN_SEA);
+    }
+    let [lr, lg, lb] = rivers::LAKE_COLOUR;
+    per_pixel(s, |i| {
+        let d = s.lookup.sample_of(i);
+        if net.drainage.ocean[d] {
+            BASIN_SEA
+        } else if net.is_lake(d) {
+            Color32::from_rgb(lr, lg, lb)
+        } else {
+            // Outlets of neighbouring basins are scattered through the index range.
+            let [r, g, b] = plate_colour(net.outlets[d].wrapping_mul(0x9E37_79B1));
+            Color32::from_rgb(r, g, b)
+        }
+    })
 }
 
 /// The Laplacian of the elevation on the map grid (km per pixel², wrapped in longitude),

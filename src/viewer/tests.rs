@@ -350,6 +350,94 @@ fn the_overlay_menu_switches_what_is_drawn() {
 }
 
 #[test]
+fn the_rivers_basins_and_thickness_overlays_render() {
+    let mut h = Harness::new(plain);
+    h.step(3);
+    let snap = h.app.snap.clone().unwrap();
+    let drawn = |h: &Harness| map::image_hash(h.app.map_image.as_ref().expect("a map is drawn"));
+    let elevation = map::render_base(&snap, BaseLayer::Elevation);
+    let mut hashes = std::collections::HashSet::new();
+    for layer in [BaseLayer::Rivers, BaseLayer::Basins, BaseLayer::Thickness] {
+        h.click(&format!("overlay:{}", layer.label()));
+        h.frame(Vec::new());
+        assert_eq!(h.app.base, layer);
+        let now = drawn(&h);
+        assert_eq!(
+            now,
+            map::image_hash(&map::render_base(&snap, layer)),
+            "the texture holds the {layer:?} map"
+        );
+        assert_ne!(
+            now,
+            map::image_hash(&elevation),
+            "{layer:?} looks like the elevation map"
+        );
+        assert!(hashes.insert(now), "{layer:?} looks like another overlay");
+    }
+    h.finish();
+    // Rivers: the elevation map with (bluer) rivers drawn, nothing else changed much.
+    let net = snap.rivers();
+    assert!(!net.reaches.is_empty(), "no river on the planet");
+    let rivers = map::render_base(&snap, BaseLayer::Rivers);
+    let bluer = rivers
+        .pixels
+        .iter()
+        .zip(&elevation.pixels)
+        .filter(|(r, e)| r != e)
+        .inspect(|(r, e)| assert!(r.b() >= e.b() || r.r() < e.r(), "{r:?} over {e:?}"))
+        .count();
+    assert!(
+        bluer > 100 && bluer < rivers.pixels.len() / 5,
+        "{bluer} pixels show rivers or lakes"
+    );
+    // Along the largest river (away from lakes), the map is river-coloured.
+    let big = net.reaches.iter().find(|r| r.rank == 1).expect("a river");
+    let lk = &snap.lookup;
+    let (w, hgt) = (lk.width as f64, lk.height as f64);
+    let on_river = big.samples[..big.samples.len() - 1]
+        .iter()
+        .filter(|&&s| !net.is_lake(s as usize))
+        .map(|&s| {
+            let (lat, lon) = crate::geometry::spherical::to_lat_lon_deg(snap.positions[s as usize]);
+            let x = (((lon + 180.0) / 360.0 * w) as usize).min(lk.width as usize - 1);
+            let y = (((90.0 - lat) / 180.0 * hgt) as usize).min(lk.height as usize - 1);
+            y * lk.width as usize + x
+        })
+        .collect::<Vec<_>>();
+    let blue = on_river
+        .iter()
+        .filter(|&&i| {
+            let p = rivers.pixels[i];
+            p != elevation.pixels[i] && p.b() > p.r() + 60
+        })
+        .count();
+    assert!(
+        !on_river.is_empty() && blue * 10 >= on_river.len() * 8,
+        "{blue} of {} points of the largest river are drawn",
+        on_river.len()
+    );
+    // Basins: one colour per outlet, many basins on land.
+    let basins = map::render_base(&snap, BaseLayer::Basins);
+    let colours: std::collections::HashSet<_> = basins.pixels.iter().collect();
+    assert!(colours.len() > 20, "{} basin colours", colours.len());
+    // Thickness: continents (thick) and ocean floor (thin) in different colours.
+    let thick = map::render_base(&snap, BaseLayer::Thickness);
+    let lk = &snap.lookup;
+    let (mut oc, mut co) = (None, None);
+    for i in 0..lk.corners.len() {
+        let d = lk.sample_of(i);
+        let t = snap.crust.thickness_km[d];
+        if t < 10.0 && oc.is_none() && lk.lerp(&snap.crust.thickness_km, i) < 10.0 {
+            oc = Some(thick.pixels[i]);
+        }
+        if t > 30.0 && co.is_none() && lk.lerp(&snap.crust.thickness_km, i) > 30.0 {
+            co = Some(thick.pixels[i]);
+        }
+    }
+    assert_ne!(oc.expect("thin crust"), co.expect("thick crust"));
+}
+
+#[test]
 fn a_fracture_line_drawn_on_the_map_rifts_the_plate() {
     let mut h = Harness::new(plain);
     let before = h.app.snap.clone().unwrap().plates.len();

@@ -5,7 +5,7 @@
 
 use std::path::PathBuf;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, channel};
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::{Arc, Condvar, Mutex, OnceLock};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -17,6 +17,7 @@ use crate::components::{Plate, PlateFrame, SubductionFront, Terrane};
 use crate::geometry::SphereMesh;
 use crate::geometry::spherical::to_lat_lon_deg;
 use crate::io::maps::{Raster, write_all_maps};
+use crate::io::rivers::{RiverNetwork, write_rivers};
 use crate::io::save::{self, CommandHistory};
 use crate::io::summary::CrustSampler;
 use crate::plugins::PhenomenonInfo;
@@ -24,6 +25,8 @@ use crate::plugins::TectonicSystems;
 use crate::resources::params::{ParamValue, Params};
 use crate::resources::plugin_params::PluginParam;
 use crate::resources::{Crust, CrustStats, FrontPoints};
+use crate::systems::relief::graph::ReliefGraph;
+use crate::systems::relief::network::relief_graph;
 
 /// Width of the map lookup grid (pixels); the height is half.
 pub const MAP_WIDTH: u32 = 1024;
@@ -241,6 +244,10 @@ pub struct Snapshot {
     pub lookup: Arc<PixelLookup>,
     /// Unit positions of the reference samples.
     pub positions: Arc<Vec<DVec3>>,
+    /// The sample graph of the reference mesh (for the drainage network).
+    pub graph: Arc<ReliefGraph>,
+    /// The drainage network of `crust`, made on first use ([`Snapshot::rivers`]).
+    pub rivers: Arc<OnceLock<RiverNetwork>>,
     /// Every plate, by id.
     pub plates: Vec<PlateRow>,
     /// Subduction fronts.
@@ -269,6 +276,18 @@ impl Snapshot {
     /// The plate with id `id`.
     pub fn plate(&self, id: u32) -> Option<&PlateRow> {
         self.plates.iter().find(|p| p.id == id)
+    }
+
+    /// The drainage network of the crust shown (rivers, lakes, basins), computed the first
+    /// time it is asked for (by whoever draws a layer that needs it).
+    pub fn rivers(&self) -> &RiverNetwork {
+        self.rivers.get_or_init(|| {
+            RiverNetwork::on_graph(
+                &self.graph,
+                &self.crust,
+                self.params.rivers.min_sea_area_km2,
+            )
+        })
     }
 }
 
@@ -442,6 +461,7 @@ struct Worker {
     mesh_generation: u64,
     lookup: Arc<PixelLookup>,
     positions: Arc<Vec<DVec3>>,
+    graph: Arc<ReliefGraph>,
     log: Vec<String>,
     last_publish: Instant,
 }
@@ -456,6 +476,7 @@ impl Worker {
     ) -> Self {
         let lookup = Arc::new(PixelLookup::build(sim.mesh(), MAP_WIDTH, MAP_HEIGHT));
         let positions = Arc::new(sim.mesh().positions.clone());
+        let graph = Arc::new(relief_graph(sim.mesh()));
         Self {
             sim,
             plugins,
@@ -472,6 +493,7 @@ impl Worker {
             mesh_generation: 1,
             lookup,
             positions,
+            graph,
             log: Vec::new(),
             last_publish: Instant::now(),
         }
@@ -489,6 +511,7 @@ impl Worker {
         self.sim = sim;
         self.lookup = Arc::new(PixelLookup::build(self.sim.mesh(), MAP_WIDTH, MAP_HEIGHT));
         self.positions = Arc::new(self.sim.mesh().positions.clone());
+        self.graph = Arc::new(relief_graph(self.sim.mesh()));
         self.mesh_generation += 1;
         self.running = false;
         self.run_until_my = None;
@@ -677,8 +700,16 @@ impl Worker {
                         width / 2,
                     )
                     .map_err(|e| e.to_string())?;
-                    write_all_maps(&raster, &dir, self.sim.params().planet.radius_km)
-                        .map_err(|e| e.to_string())
+                    let radius_km = self.sim.params().planet.radius_km;
+                    let mut files =
+                        write_all_maps(&raster, &dir, radius_km).map_err(|e| e.to_string())?;
+                    let min_sea = self.sim.params().rivers.min_sea_area_km2;
+                    let rivers = RiverNetwork::on_graph(&self.graph, &view, min_sea);
+                    files.extend(
+                        write_rivers(&raster, self.sim.mesh(), &rivers, &dir, radius_km)
+                            .map_err(|e| e.to_string())?,
+                    );
+                    Ok(files)
                 })();
                 match result {
                     Ok(files) => {
@@ -802,6 +833,8 @@ impl Worker {
             crust,
             lookup: self.lookup.clone(),
             positions: self.positions.clone(),
+            graph: self.graph.clone(),
+            rivers: Arc::default(),
             plates,
             fronts,
             terranes,

@@ -27,6 +27,9 @@
 //! kernels raise the elevation directly, and the paper's erosion law (phenomenon `erosion`, off
 //! by default) is the one to use.
 //!
+//! For the outputs, [`network`] builds the network of a given crust (the resampled crust the maps
+//! show), the basin of every sample and the rivers cut into reaches.
+//!
 //! The graph is the reference mesh: rivers ignore plate boundaries. Between two resamplings the
 //! plates have moved, so an edge across a boundary joins samples that are no longer side by side;
 //! few rivers cross a boundary, and the next resampling puts the samples back in place.
@@ -35,6 +38,7 @@ pub mod diffusion;
 pub mod drainage;
 pub mod graph;
 pub mod isostasy;
+pub mod network;
 pub mod sediment;
 pub mod stream_power;
 

@@ -773,7 +773,7 @@ fn an_out_of_range_parameter_typed_in_the_panel_is_refused_with_a_message() {
     assert_eq!(h.app.sim.last_sent(), sent, "nothing was sent");
     let (after, history) = h.inspect(|sim| {
         (
-            sim.params().rivers.erodibility_per_my,
+            sim.params().continent.erosion_mm_per_yr,
             sim.world()
                 .resource::<crate::io::save::CommandHistory>()
                 .entries
@@ -826,7 +826,7 @@ fn a_parameter_change_from_the_panel_is_recorded_and_replays() {
             sim.world()
                 .resource::<crate::io::save::CommandHistory>()
                 .clone(),
-            sim.params().continent.erosion_mm_per_yr,
+            sim.params().rivers.erodibility_per_my,
         )
     });
     h.finish();

@@ -492,7 +492,10 @@ impl Simulation {
         let gaps = resample::gaps_from_nearest(mesh, &sources, &mut next);
         if ocean_on {
             let elapsed = clock.steps_since_resample as f64 * params.time.time_step_my;
-            oceanic_crust::fill_ridge_crust(mesh, params, elapsed, &gaps, &mut next);
+            let isostatic = world
+                .get_resource::<crate::resources::ReliefMode>()
+                .is_some_and(|m| m.isostatic);
+            oceanic_crust::fill_ridge_crust(mesh, params, isostatic, elapsed, &gaps, &mut next);
         }
         let mut next_id = world.resource::<NextPlateId>().0;
         resample::defragment_plates(

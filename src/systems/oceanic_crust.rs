@@ -22,7 +22,8 @@ use rayon::prelude::*;
 
 use crate::geometry::SphereMesh;
 use crate::resources::params::Params;
-use crate::resources::{Crust, CrustType, Orogeny};
+use crate::resources::{Crust, CrustType, Orogeny, ReliefMode};
+use crate::systems::relief::isostasy::ocean_floor_km;
 use crate::systems::resample::{GapSample, ResampleWork};
 
 /// Elevation of ocean floor that formed at the ridge `age_my` ago: the exact solution of the
@@ -50,10 +51,14 @@ pub fn ocean_floor_age_my(z_km: f64, params: &Params) -> f64 {
     (-ratio.max(1e-12).ln() / k).max(0.0)
 }
 
-/// One gap sample turned into ridge crust: (elevation km, age My, ridge direction).
+/// One gap sample turned into ridge crust: (elevation km, age My, ridge direction). With
+/// `isostatic` (the isostasy phenomenon on) the elevation is the age–depth law's floor for the
+/// crust's age, the one isostasy gives bare new floor; otherwise the paper's ridge profile blended
+/// with the plates' edges.
 pub fn ridge_crust(
     mesh: &SphereMesh,
     params: &Params,
+    isostatic: bool,
     elevation_km: &[f32],
     elapsed_my: f64,
     g: &GapSample,
@@ -88,6 +93,14 @@ pub fn ridge_crust(
         None => (1.0, z1, DVec3::ZERO),
     };
     let age = alpha * elapsed_my;
+    if isostatic {
+        let z = ocean_floor_km(age, params);
+        return Some((
+            z as f32,
+            age as f32,
+            [ridge.x as f32, ridge.y as f32, ridge.z as f32],
+        ));
+    }
     let z_ridge = ocean_floor_elevation_km(age, params);
     let z = (alpha * z_bar + (1.0 - alpha) * z_ridge).min(params.ocean.ridge_elevation_km);
     Some((
@@ -101,26 +114,37 @@ pub fn ridge_crust(
 pub fn generate_oceanic_crust(
     mesh: Res<SphereMesh>,
     params: Res<Params>,
+    mode: Option<Res<ReliefMode>>,
     mut work: ResMut<ResampleWork>,
 ) {
     if !work.active {
         return;
     }
     let work = &mut *work;
-    fill_ridge_crust(&mesh, &params, work.elapsed_my, &work.gaps, &mut work.next);
+    let isostatic = mode.is_some_and(|m| m.isostatic);
+    fill_ridge_crust(
+        &mesh,
+        &params,
+        isostatic,
+        work.elapsed_my,
+        &work.gaps,
+        &mut work.next,
+    );
 }
 
-/// Writes new ridge crust into every gap sample of `next` (gaps opened over `elapsed_my`).
+/// Writes new ridge crust into every gap sample of `next` (gaps opened over `elapsed_my`); see
+/// [`ridge_crust`] for `isostatic`.
 pub fn fill_ridge_crust(
     mesh: &SphereMesh,
     params: &Params,
+    isostatic: bool,
     elapsed_my: f64,
     gaps: &[GapSample],
     next: &mut Crust,
 ) {
     let made: Vec<Option<(f32, f32, [f32; 3])>> = gaps
         .par_iter()
-        .map(|g| ridge_crust(mesh, params, &next.elevation_km, elapsed_my, g))
+        .map(|g| ridge_crust(mesh, params, isostatic, &next.elevation_km, elapsed_my, g))
         .collect();
     let thickness = params.init.oceanic_thickness_km as f32;
     for (g, m) in gaps.iter().zip(made) {

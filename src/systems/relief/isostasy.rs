@@ -152,6 +152,27 @@ pub enum AgeDepthLaw {
     ParsonsSclater,
 }
 
+impl AgeDepthLaw {
+    /// The law the parameters choose (`isostasy.parsons_sclater`).
+    pub fn of(params: &crate::resources::Params) -> Self {
+        if params.isostasy.parsons_sclater {
+            AgeDepthLaw::ParsonsSclater
+        } else {
+            AgeDepthLaw::Gdh1
+        }
+    }
+}
+
+/// The sea-floor elevation (km, negative) of bare oceanic crust `age_my` old under the law and
+/// ridge offset the parameters choose: what isostasy gives new ocean floor without sediment.
+pub fn ocean_floor_km(age_my: f64, params: &crate::resources::Params) -> f64 {
+    -ocean_depth_km(
+        age_my,
+        AgeDepthLaw::of(params),
+        params.isostasy.ridge_depth_offset_km,
+    )
+}
+
 /// Ocean depth (km, positive down) of sea floor `age_my` old, plus `ridge_offset_km` (use it to
 /// move the ridge to the observed −2.7…−3.0 km; 0 keeps the published law).
 pub fn ocean_depth_km(age_my: f64, law: AgeDepthLaw, ridge_offset_km: f64) -> f64 {

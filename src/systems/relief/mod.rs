@@ -470,11 +470,11 @@ pub fn trench_profile_km(d_km: f64, depth_km: f64, width_km: f64) -> f64 {
     if x <= 0.0 { 0.0 } else { depth_km * x * x }
 }
 
-/// [`trench_profile_km`] on a mesh of mean spacing `spacing_km`: full depth within half a
-/// spacing of the front, so that a trench narrower than a sample still has its deepest sample
-/// (at 100,000 samples the nearest sample can lie 35 km from the front).
+/// [`trench_profile_km`] on a mesh of mean spacing `spacing_km`: full depth within a quarter
+/// spacing of the front, so that a trench narrower than a sample still shows at the samples next
+/// to the front (at 100,000 samples the nearest one can lie 35 km from it).
 pub fn trench_depth_on_mesh_km(d_km: f64, depth_km: f64, width_km: f64, spacing_km: f64) -> f64 {
-    let d = (d_km.abs() - 0.5 * spacing_km).max(0.0);
+    let d = (d_km.abs() - 0.25 * spacing_km).max(0.0);
     trench_profile_km(d, depth_km, width_km)
 }
 
@@ -513,11 +513,7 @@ pub fn apply_isostasy(
         state.iso = RegionalIsostasy::with_coarse_level(&mesh.positions, g, &iso);
         state.iso_key = Some(key);
     }
-    let law = if ip.parsons_sclater {
-        AgeDepthLaw::ParsonsSclater
-    } else {
-        AgeDepthLaw::Gdh1
-    };
+    let law = AgeDepthLaw::of(&params);
     let offset = ip.ridge_depth_offset_km;
     if state
         .table

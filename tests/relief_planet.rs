@@ -1,0 +1,178 @@
+//! The relief phenomena on whole planets: eroded volume equals deposited volume every step of a
+//! run with rifts, collisions and resamplings; new ocean floor between diverging plates sinks as
+//! the age–depth law says; mean land elevation stays Earth-like from 200 to 1000 My; old saves
+//! get a thickness that keeps their relief.
+
+mod common;
+
+use common::*;
+use glam::DVec3;
+use tectonic_planets::io::hypsometry::hypsometry;
+use tectonic_planets::prelude::*;
+use tectonic_planets::systems::relief::isostasy::{AgeDepthLaw, ocean_depth_km};
+use tectonic_planets::systems::relief::{ReliefState, SurfaceFlux};
+
+#[test]
+fn eroded_volume_equals_deposited_volume_every_step() {
+    let mut p = params(20_000, 4);
+    // Rifts every few tens of My, so the run holds some.
+    p.rifting.frequency_per_my = 0.03;
+    let mut sim = Simulation::new(p).unwrap();
+    let mut checked = 0;
+    for step in 0..80 {
+        sim.step().unwrap();
+        let f = sim.world().resource::<SurfaceFlux>();
+        let (eroded, deposited) = (f.eroded_km3(), f.deposited_km3());
+        if eroded > 0.0 {
+            let gap = (eroded - deposited).abs() / eroded;
+            assert!(
+                gap <= 1e-3,
+                "step {step}: eroded {eroded:.1} km³, deposited {deposited:.1} km³"
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked >= 70, "only {checked} steps eroded anything");
+    // The run exercised what can move crust about: rifts, collisions, resamplings.
+    let world = sim.world();
+    let rifts = world
+        .resource::<tectonic_planets::systems::rifting::RiftLog>()
+        .events
+        .len();
+    let sutures = world
+        .resource::<tectonic_planets::resources::Sutures>()
+        .total;
+    assert!(rifts >= 1, "no rift in the run");
+    assert!(sutures >= 1, "no collision in the run");
+    assert!(
+        sim.clock().resamplings >= 5,
+        "{} resamplings",
+        sim.clock().resamplings
+    );
+    let f = sim.world().resource::<SurfaceFlux>();
+    let total_gap = (f.total_eroded_km3 - f.total_deposited_km3).abs() / f.total_eroded_km3;
+    assert!(total_gap <= 1e-3, "over the run: {total_gap:e}");
+}
+
+#[test]
+fn new_ocean_floor_between_diverging_plates_follows_the_age_depth_law() {
+    let mut p = params(40_000, 9);
+    p.init.continental_fraction = 0.0;
+    p.rifting.frequency_per_my = 0.0;
+    p.resample.min_interval_steps = 10;
+    p.resample.max_interval_steps = 10;
+    let mut sim = Simulation::new(p).unwrap();
+    let mesh = sim.mesh().clone();
+    let halves: Vec<u32> = mesh
+        .positions
+        .iter()
+        .map(|q| if q.z >= 0.0 { 0 } else { 1 })
+        .collect();
+    let omega = 50.0 / 6370.0;
+    let turn = |pole: DVec3| PlateMotion {
+        euler_pole: pole,
+        angular_speed_rad_per_my: omega,
+    };
+    sim.reassign_plates(halves, &[(0, turn(DVec3::Y)), (1, turn(-DVec3::Y))])
+        .unwrap();
+    // Old floor is marked very old, so that new floor is known by its age.
+    sim.world_mut()
+        .resource_mut::<Crust>()
+        .age_my
+        .iter_mut()
+        .for_each(|a| *a = 1000.0);
+    // Isostasy runs before the step's aging and before its resampling: after a step without a
+    // resampling, every sample's elevation is the law's at its age one time step ago.
+    sim.run_steps(41).unwrap();
+    assert!(sim.clock().steps_since_resample >= 1);
+    let dt = sim.params().time.time_step_my;
+    let crust = sim.crust().clone();
+    let trench = sim.world().resource::<ReliefState>().trench_km.clone();
+    let pelagic_km_per_my = sim.params().sediment.pelagic_rate_m_per_my * 1e-3;
+    let gain = oceanic_load_gain(sim.params());
+    let (mut ages, mut depths) = (Vec::new(), Vec::new());
+    let mut worst = 0.0f64;
+    for i in 0..mesh.len() {
+        let age = crust.age_my[i] as f64;
+        if age >= 80.0 || trench.get(i).is_some_and(|&t| t > 0.0) {
+            continue;
+        }
+        let z = crust.elevation_km[i] as f64;
+        let law = -ocean_depth_km((age - dt).max(0.0), AgeDepthLaw::Gdh1, 0.0);
+        // Pelagic sediment raises the floor by at most gain × rate × age.
+        let lift = z - law;
+        let off = if lift < 0.0 {
+            -lift
+        } else {
+            (lift - gain * pelagic_km_per_my * age).max(0.0)
+        };
+        worst = worst.max(off);
+        ages.push(age.sqrt());
+        depths.push(-z);
+    }
+    assert!(ages.len() > 500, "only {} samples of new floor", ages.len());
+    let rho = spearman(&ages, &depths);
+    assert!(rho >= 0.9, "depth against √age: rank correlation {rho:.3}");
+    assert!(worst <= 0.05, "new floor off the law by {worst:.3} km");
+}
+
+#[test]
+fn mean_land_elevation_stays_earth_like_from_200_to_1000_my() {
+    let mut sim = Simulation::new(params(50_000, 1)).unwrap();
+    sim.run_for(200.0).unwrap();
+    let mut seen = Vec::new();
+    for _ in 0..9 {
+        let view = sim.resampled_crust();
+        let h = hypsometry(sim.mesh(), &view);
+        seen.push((sim.time_my(), h.mean_land_m, h.land_fraction));
+        sim.run_for(100.0).unwrap();
+    }
+    let view = sim.resampled_crust();
+    let h = hypsometry(sim.mesh(), &view);
+    seen.push((sim.time_my(), h.mean_land_m, h.land_fraction));
+    for &(t, mean, land) in &seen {
+        assert!(
+            (400.0..=1200.0).contains(&mean),
+            "{t:.0} My: mean land elevation {mean:.0} m ({seen:?})"
+        );
+        assert!(
+            (0.2..=0.4).contains(&land),
+            "{t:.0} My: land fraction {land:.3} ({seen:?})"
+        );
+    }
+}
+
+#[test]
+fn a_save_from_before_the_relief_keeps_its_relief() {
+    // The version-1 fixture was written before thickness was live: its thickness is 35 km on
+    // continents and 7 km at sea, and the relief is in the elevation alone.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("saves/fixture-v1.planet");
+    let mut sim = tectonic_planets::io::save::load_from_file(&path).unwrap();
+    let before = sim.crust().clone();
+    let varied = before
+        .thickness_km
+        .iter()
+        .zip(&before.crust_type)
+        .filter(|(t, c)| **c == CrustType::Continental && (**t - 35.0).abs() > 0.5)
+        .count();
+    assert!(
+        varied > 10,
+        "thickness not derived from elevation ({varied} samples)"
+    );
+    // One step of isostasy keeps the continents where they were (a regional response and the
+    // step's erosion aside): within 300 m on most of the land.
+    sim.step().unwrap();
+    let after = sim.crust();
+    let land: Vec<usize> = (0..before.len())
+        .filter(|&i| before.crust_type[i] == CrustType::Continental && before.elevation_km[i] > 0.2)
+        .collect();
+    let close = land
+        .iter()
+        .filter(|&&i| (after.elevation_km[i] - before.elevation_km[i]).abs() < 0.3)
+        .count();
+    assert!(
+        close * 10 >= land.len() * 8,
+        "{close} of {} land samples kept their elevation",
+        land.len()
+    );
+}

@@ -234,7 +234,7 @@ fn plugins_are_listed_switched_and_configured() {
             .any(|l| l.starts_with("erosion ") && l.contains(" off ")),
         "{text}"
     );
-    for name in ["isostasy ", "drainage ", "rivers ", "sediment "] {
+    for name in ["isostasy ", "drainage ", "rivers ", "coasts ", "sediment "] {
         assert!(
             text.lines()
                 .any(|l| l.starts_with(name) && l.contains(" on ")),

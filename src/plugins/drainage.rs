@@ -27,7 +27,8 @@ impl Plugin for DrainagePlugin {
             "rivers: each land sample drains to the sea; depressions fill to lakes",
         );
         app.init_resource::<relief::ReliefState>()
-            .init_resource::<relief::DrainageNetwork>();
+            .init_resource::<relief::DrainageNetwork>()
+            .init_resource::<relief::SurfaceFlux>();
         app.add_systems(
             TectonicStep,
             relief::build_drainage

@@ -3,6 +3,7 @@
 //! sections. [`TectonicPlugins`] lists the group.
 
 pub mod aging;
+pub mod coasts;
 pub mod collision;
 pub mod convergence_state;
 pub mod diagnostics;
@@ -24,6 +25,7 @@ pub mod terranes;
 use bevy_app::{PluginGroup, PluginGroupBuilder};
 
 pub use aging::AgingPlugin;
+pub use coasts::CoastsPlugin;
 pub use collision::CollisionPlugin;
 pub use diagnostics::DiagnosticsPlugin;
 pub use drainage::DrainagePlugin;
@@ -59,6 +61,7 @@ impl PluginGroup for TectonicPlugins {
             .add(ErosionPlugin)
             .add(DrainagePlugin)
             .add(RiversPlugin)
+            .add(CoastsPlugin)
             .add(SedimentPlugin)
             .add(SlabPullPlugin)
             .add(RiftingPlugin)

@@ -8,16 +8,17 @@
 //!    sediment accretion (off by default: the relief phenomena below replace it).
 //! 5. [`TectonicSystems::Drainage`]: the drainage network of the surface.
 //! 6. [`TectonicSystems::Rivers`]: stream-power incision and hillslope diffusion.
-//! 7. [`TectonicSystems::Sediment`]: what was eroded is laid down.
-//! 8. [`TectonicSystems::Isostasy`]: the elevation follows from the crust (thickness, age).
-//! 9. [`TectonicSystems::SlabPull`]: subducting plates turn toward their fronts.
-//! 10. [`TectonicSystems::Rifting`]: plates break apart.
-//! 11. [`TectonicSystems::Aging`]: crust and orogenies age (the clock first, then the crust,
+//! 7. [`TectonicSystems::Coasts`]: waves cut back the coasts.
+//! 8. [`TectonicSystems::Sediment`]: what was eroded is laid down.
+//! 9. [`TectonicSystems::Isostasy`]: the elevation follows from the crust (thickness, age).
+//! 10. [`TectonicSystems::SlabPull`]: subducting plates turn toward their fronts.
+//! 11. [`TectonicSystems::Rifting`]: plates break apart.
+//! 12. [`TectonicSystems::Aging`]: crust and orogenies age (the clock first, then the crust,
 //!     then plugins that build on this step's ages: [`AgingSystems`]).
-//! 12. [`TectonicSystems::Resample`]: global resampling when due, in three chained sub-sets
+//! 13. [`TectonicSystems::Resample`]: global resampling when due, in three chained sub-sets
 //!     ([`ResampleSystems::Interpolate`], [`ResampleSystems::FillGaps`],
 //!     [`ResampleSystems::Rebuild`]).
-//! 13. [`TectonicSystems::Diagnostics`]: statistics and checks.
+//! 14. [`TectonicSystems::Diagnostics`]: statistics and checks.
 //!
 //! After every global resampling the [`AfterResample`] schedule rebuilds what depends on the
 //! plates ([`AfterResampleSystems`]: collision uplift, terranes, fronts, then plugin state
@@ -77,6 +78,8 @@ pub enum TectonicSystems {
     Drainage,
     /// River incision and hillslope diffusion.
     Rivers,
+    /// Coastal erosion.
+    Coasts,
     /// Sediment deposition.
     Sediment,
     /// Elevation from the crust.
@@ -95,13 +98,14 @@ pub enum TectonicSystems {
 
 impl TectonicSystems {
     /// Every set, in step order.
-    pub const ALL: [TectonicSystems; 13] = [
+    pub const ALL: [TectonicSystems; 14] = [
         Self::Collision,
         Self::Drift,
         Self::Subduction,
         Self::Erosion,
         Self::Drainage,
         Self::Rivers,
+        Self::Coasts,
         Self::Sediment,
         Self::Isostasy,
         Self::SlabPull,
@@ -119,6 +123,7 @@ impl TectonicSystems {
             Self::Erosion => "erosion",
             Self::Drainage => "drainage",
             Self::Rivers => "rivers",
+            Self::Coasts => "coasts",
             Self::Sediment => "sediment",
             Self::SlabPull => "slab_pull",
             Self::Rifting => "rifting",

@@ -12,9 +12,9 @@ pub fn params(samples: u64, seed: u64) -> Params {
     p
 }
 
-/// The surface processes of the relief (isostasy, drainage, rivers, sediment): tests of moving,
+/// The surface processes of the relief (isostasy, drainage, rivers, coasts, sediment): tests of moving,
 /// resampling or the paper's kernels switch them off.
-pub const RELIEF: [&str; 4] = ["isostasy", "drainage", "rivers", "sediment"];
+pub const RELIEF: [&str; 5] = ["isostasy", "drainage", "rivers", "coasts", "sediment"];
 
 /// Switches the relief phenomena off and the paper's erosion law on: the relief as the paper
 /// makes it (uplift raises the elevation, trenches are cut into it), for tests of those kernels.

@@ -1,5 +1,5 @@
 //! Relief that balances (DESIGN §7): uplift builds relief by thickening the crust; rivers,
-//! hillslopes and isostasy take it back; sediment builds shelves and fills trenches. Four
+//! hillslopes, waves and isostasy take it back; sediment builds shelves and fills trenches. Five
 //! phenomena, each a plugin, in this order within a step (after subduction):
 //!
 //! 1. **Drainage** ([`drainage`], system [`build_drainage`], set `Drainage`): every land sample
@@ -9,11 +9,14 @@
 //!    stream-power incision E = K·A^m·S^n − E_c solved implicitly along the network (Braun &
 //!    Willett 2013) and hillslope diffusion. The eroded rock leaves the crust: thickness goes down
 //!    by what the surface lost.
-//! 3. **Sediment** ([`sediment`], system [`deposit_sediment`], set `Sediment`): what was eroded
+//! 3. **Coasts** ([`coast`], system [`coast::erode_coasts`], set `Coasts`): a coast facing open
+//!    water retreats, ever more slowly as the platform of shallow water in front of it widens,
+//!    and leaves that platform at the wave base; the rock joins what the rivers carry.
+//! 4. **Sediment** ([`sediment`], system [`deposit_sediment`], set `Sediment`): what was eroded
 //!    travels down the network and is laid down in lakes, on shelves to a break near −130 m, on
 //!    slopes and rises, and in trenches and basins; it thickens the crust it lies on. Deposited
 //!    volume equals eroded volume every step ([`SurfaceFlux`]).
-//! 4. **Isostasy** ([`isostasy`], system [`apply_isostasy`], set `Isostasy`): the elevation
+//! 5. **Isostasy** ([`isostasy`], system [`apply_isostasy`], set `Isostasy`): the elevation
 //!    follows from the crust. Continental crust floats (Airy) with a regional response standing
 //!    in for flexure; ocean floor sinks with age (GDH1 or Parsons–Sclater), raised by what lies
 //!    on it (sediment, arcs: the thickness above `init.oceanic_thickness_km`) and lowered by the
@@ -34,6 +37,7 @@
 //! plates have moved, so an edge across a boundary joins samples that are no longer side by side;
 //! few rivers cross a boundary, and the next resampling puts the samples back in place.
 
+pub mod coast;
 pub mod diffusion;
 pub mod drainage;
 pub mod graph;
@@ -138,6 +142,8 @@ pub struct SurfaceFlux {
     pub sediment: SedimentBudget,
     /// Pelagic sediment laid on the sea floor this step, km³ (from the sea, not the land).
     pub pelagic_km3: f64,
+    /// Volume the waves cut from the coasts this step, km³ (its thickness is in `eroded_km`).
+    pub coastal_km3: f64,
     /// Summed over the run: eroded and deposited volumes, km³.
     pub total_eroded_km3: f64,
     /// See `total_eroded_km3`.
@@ -145,9 +151,30 @@ pub struct SurfaceFlux {
 }
 
 impl SurfaceFlux {
-    /// Volume eroded this step (incision plus diffusion lowering), km³.
+    /// Volume eroded this step (incision, diffusion lowering, coastal erosion), km³.
     pub fn eroded_km3(&self) -> f64 {
-        self.incised_km3 + self.diffusion.lowered_km3
+        self.incised_km3 + self.diffusion.lowered_km3 + self.coastal_km3
+    }
+
+    /// Starts a step on `n` samples: nothing eroded, carried or laid down yet (so that a
+    /// phenomenon switched off leaves no stale flux for the sediment to lay down again). The
+    /// run's totals are kept.
+    pub fn begin_step(&mut self, n: usize) {
+        for v in [
+            &mut self.eroded_km,
+            &mut self.diffusion_km,
+            &mut self.deposit_km,
+        ] {
+            v.clear();
+            v.resize(n, 0.0);
+        }
+        self.to_ocean_km3.clear();
+        self.to_ocean_km3.resize(n, 0.0);
+        self.incised_km3 = 0.0;
+        self.diffusion = DiffusionBudget::default();
+        self.sediment = SedimentBudget::default();
+        self.pelagic_km3 = 0.0;
+        self.coastal_km3 = 0.0;
     }
     /// Volume deposited this step (sediment plus diffusion raising), km³.
     pub fn deposited_km3(&self) -> f64 {
@@ -174,6 +201,15 @@ pub struct ReliefState {
     /// by the last isostasy pass. The fronts add it back to read the floor that arrives at
     /// the trench.
     pub trench_km: Vec<f32>,
+}
+
+impl ReliefState {
+    /// Deflection w of the lithosphere under the continents' regional load (km, positive
+    /// down) from the last isostasy pass: the flexural moat beside a continent at sea, before
+    /// the `isostasy.max_flexural_support_km` clamp.
+    pub fn deflection_km(&self) -> &[f32] {
+        self.iso.deflection_km()
+    }
 }
 
 /// Builds the sample graph of `mesh` into `slot` unless it is there already (true when it was
@@ -248,6 +284,7 @@ pub fn build_drainage(
     mut crust: ResMut<Crust>,
     mut state: ResMut<ReliefState>,
     mut network: ResMut<DrainageNetwork>,
+    mut flux: ResMut<SurfaceFlux>,
     rain: Option<Res<Precipitation>>,
     mut gpu: Option<ResMut<GpuContext>>,
 ) {
@@ -256,6 +293,7 @@ pub fn build_drainage(
     }
     let state = &mut *state;
     let n = mesh.len();
+    flux.begin_step(n);
     state.oceanic.clear();
     state
         .oceanic

@@ -1,0 +1,360 @@
+//! Coastal erosion (wave planation): the sea cuts back a coast that faces open water and leaves
+//! a platform just below sea level, which the sediment then builds into a shelf.
+//!
+//! Model: a land sample next to the sea retreats at `v = v₀·exp(−W/W₀)` km/My, `W` the width of
+//! shallow water (shallower than `open_depth`) in front of it: waves lose their energy crossing a
+//! wide shelf, so a coast cuts back fast while its platform is narrow and ever more slowly as the
+//! platform widens (Sunamura 1992; Trenhaile 2000). A retreat of `v·dt` across a sample of width
+//! `Δx = √area` lowers the sample by the fraction `v·dt/Δx` of its height above the wave base
+//! (the area-averaged cliff retreat), and what is removed is carried off like any eroded rock:
+//! it enters the sediment routing at that sample.
+
+use bevy_ecs::prelude::*;
+use rayon::prelude::*;
+
+use super::graph::ReliefGraph;
+use super::{DrainageNetwork, ReliefState, SurfaceFlux};
+use crate::geometry::SphereMesh;
+use crate::gpu::{FieldMask, GpuContext};
+use crate::resources::{Crust, Params};
+
+/// Constants of coastal erosion.
+#[derive(Clone, Copy, Debug)]
+pub struct CoastParams {
+    /// Retreat rate of a coast facing open water, km/My (1 km/My = 1 mm/yr).
+    pub retreat_km_per_my: f64,
+    /// Width of shallow water over which the retreat rate falls by e, km.
+    pub damping_width_km: f64,
+    /// Depth (km, positive) the waves plane the platform down to.
+    pub wave_base_km: f64,
+    /// Water deeper than this (km, positive) is open sea: the shallow-water width is measured
+    /// from it.
+    pub open_depth_km: f64,
+}
+
+/// Scratch of [`coastal_erosion`], reused across steps.
+#[derive(Default)]
+pub struct CoastScratch {
+    width: Vec<f32>,
+    heap: std::collections::BinaryHeap<std::cmp::Reverse<(u32, u32)>>,
+}
+
+/// Width (km) of shallow sea between each sea sample and open water: the shortest path along the
+/// graph, through sea samples shallower than `open_depth_km`, to a sea sample deeper than it
+/// (0 for those; infinite for shallow seas with no open water). Land samples get infinity.
+/// Dijkstra from every open-sea sample, ties broken by index: deterministic.
+pub fn shallow_width_km(
+    g: &ReliefGraph,
+    ocean: &[bool],
+    elevation_km: &[f32],
+    open_depth_km: f64,
+    scratch: &mut CoastScratch,
+) {
+    let n = g.len();
+    let open = -(open_depth_km as f32);
+    let width = &mut scratch.width;
+    width.clear();
+    width.resize(n, f32::INFINITY);
+    let heap = &mut scratch.heap;
+    heap.clear();
+    for i in 0..n {
+        if ocean[i] && elevation_km[i] <= open {
+            width[i] = 0.0;
+            // Only open samples next to shallow sea start a search.
+            if g.edges(i).any(|e| {
+                let j = g.neighbors[e] as usize;
+                ocean[j] && elevation_km[j] > open
+            }) {
+                heap.push(std::cmp::Reverse((0f32.to_bits(), i as u32)));
+            }
+        }
+    }
+    while let Some(std::cmp::Reverse((bits, i))) = heap.pop() {
+        let i = i as usize;
+        let d = f32::from_bits(bits);
+        if d > width[i] {
+            continue;
+        }
+        for e in g.edges(i) {
+            let j = g.neighbors[e] as usize;
+            if !ocean[j] || elevation_km[j] <= open {
+                continue;
+            }
+            let dj = d + g.edge_km[e];
+            if dj < width[j] {
+                width[j] = dj;
+                heap.push(std::cmp::Reverse((dj.to_bits(), j as u32)));
+            }
+        }
+    }
+}
+
+/// Lowers every land sample next to the sea by its coastal retreat over `dt_my` (see the module
+/// documentation), adding the thickness removed to `eroded_km`. `ocean` is the sea mask (lakes
+/// are not sea: their waves are small). Returns the volume removed, km³.
+pub fn coastal_erosion(
+    g: &ReliefGraph,
+    ocean: &[bool],
+    elevation_km: &mut [f32],
+    eroded_km: &mut [f32],
+    p: &CoastParams,
+    dt_my: f64,
+    scratch: &mut CoastScratch,
+) -> f64 {
+    let n = g.len();
+    if p.retreat_km_per_my <= 0.0
+        || dt_my <= 0.0
+        || ocean.len() < n
+        || elevation_km.len() < n
+        || eroded_km.len() < n
+    {
+        return 0.0;
+    }
+    shallow_width_km(g, ocean, elevation_km, p.open_depth_km, scratch);
+    let width = &scratch.width;
+    let base = -p.wave_base_km;
+    let w0 = p.damping_width_km.max(1e-6);
+    // Lowering of each coastal land sample, from the surface before any of them moved.
+    let lower: Vec<(u32, f32)> = (0..n)
+        .into_par_iter()
+        .with_min_len(8192)
+        .filter_map(|i| {
+            if ocean[i] {
+                return None;
+            }
+            let z = elevation_km[i] as f64;
+            if !(z > base) {
+                return None;
+            }
+            let w = g
+                .edges(i)
+                .filter(|&e| ocean[g.neighbors[e] as usize])
+                .map(|e| width[g.neighbors[e] as usize])
+                .fold(f32::INFINITY, f32::min);
+            if !w.is_finite() {
+                return None;
+            }
+            let dx = g.area_km2[i].max(1e-12).sqrt();
+            let v = p.retreat_km_per_my * (-(w as f64) / w0).exp();
+            let f = (v * dt_my / dx).min(1.0);
+            let d = ((z - base) * f) as f32;
+            (d > 0.0).then_some((i as u32, d))
+        })
+        .collect();
+    let mut volume = 0.0;
+    for (i, d) in lower {
+        let i = i as usize;
+        elevation_km[i] -= d;
+        eroded_km[i] += d;
+        volume += d as f64 * g.area_km2[i];
+    }
+    volume
+}
+
+/// State of the coastal erosion system (scratch only).
+#[derive(Resource, Default)]
+pub struct CoastState {
+    scratch: CoastScratch,
+}
+
+/// The coastal-erosion constants of `params`.
+pub fn coast_params(params: &Params) -> CoastParams {
+    let c = &params.coasts;
+    CoastParams {
+        retreat_km_per_my: c.retreat_km_per_my,
+        damping_width_km: c.damping_width_km,
+        wave_base_km: c.wave_base_m * 1e-3,
+        open_depth_km: c.open_water_depth_m * 1e-3,
+    }
+}
+
+/// Coastal erosion (phenomenon `coasts`): coasts facing open water retreat and leave a platform
+/// at the wave base; the rock removed joins what the rivers carry (to the sediment routing).
+pub fn erode_coasts(
+    params: Res<Params>,
+    mesh: Res<SphereMesh>,
+    mut crust: ResMut<Crust>,
+    relief: Res<ReliefState>,
+    mut state: ResMut<CoastState>,
+    network: Res<DrainageNetwork>,
+    mut flux: ResMut<SurfaceFlux>,
+    mut gpu: Option<ResMut<GpuContext>>,
+) {
+    let n = mesh.len();
+    if !network.built || network.drainage.ocean.len() != n {
+        return;
+    }
+    const WRITES: FieldMask = FieldMask(FieldMask::ELEVATION.0 | FieldMask::THICKNESS.0);
+    let Some(declared) = super::before_write(&mut crust, &mut gpu, FieldMask::NONE, WRITES) else {
+        return;
+    };
+    let Some(g) = relief.graph.as_ref() else {
+        return;
+    };
+    let flux = &mut *flux;
+    flux.eroded_km.resize(n, 0.0);
+    let mut crust_res = crust;
+    let crust = &mut *crust_res;
+    // The thickness removed per sample this step, apart from the rivers'.
+    let mut removed = vec![0.0f32; n];
+    let volume = coastal_erosion(
+        g,
+        &network.drainage.ocean,
+        &mut crust.elevation_km,
+        &mut removed,
+        &coast_params(&params),
+        params.time.time_step_my,
+        &mut state.scratch,
+    );
+    crust
+        .thickness_km
+        .par_iter_mut()
+        .zip(flux.eroded_km.par_iter_mut())
+        .zip(removed.par_iter())
+        .with_min_len(8192)
+        .for_each(|((t, e), &r)| {
+            *t -= r;
+            *e += r;
+        });
+    flux.coastal_km3 = volume;
+    flux.total_eroded_km3 += volume;
+    super::after_write(&crust_res, &mut gpu, WRITES, declared);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::SphereMesh;
+
+    /// A 20k-sample sphere: land north of `lat0` (500 m), sea south of it, 4 km deep except a
+    /// shallow band `shelf_km` wide along the coast (100 m deep).
+    fn planet(shelf_km: f64) -> (ReliefGraph, Vec<bool>, Vec<f32>) {
+        let mesh = SphereMesh::fibonacci(20_000, 0.0, 0, 6371.0).expect("mesh");
+        let g = ReliefGraph::new(
+            &mesh.positions,
+            &mesh.neighbor_start,
+            &mesh.neighbors,
+            Some(&mesh.triangles),
+            Some(&mesh.area_km2),
+            mesh.radius_km,
+        );
+        let lat0 = 0.2f64;
+        let mut z = Vec::new();
+        let mut ocean = Vec::new();
+        for p in &mesh.positions {
+            let lat = p.z.clamp(-1.0, 1.0).asin();
+            let below_km = (lat0 - lat) * 6371.0;
+            if below_km <= 0.0 {
+                z.push(0.5);
+                ocean.push(false);
+            } else if below_km < shelf_km {
+                z.push(-0.1);
+                ocean.push(true);
+            } else {
+                z.push(-4.0);
+                ocean.push(true);
+            }
+        }
+        (g, ocean, z)
+    }
+
+    fn params() -> CoastParams {
+        CoastParams {
+            retreat_km_per_my: 20.0,
+            damping_width_km: 40.0,
+            wave_base_km: 0.05,
+            open_depth_km: 0.2,
+        }
+    }
+
+    #[test]
+    fn open_coast_retreats_to_the_wave_base_and_counts_its_volume() {
+        let (g, ocean, mut z) = planet(0.0);
+        let before = z.clone();
+        let mut eroded = vec![0.0f32; z.len()];
+        let mut s = CoastScratch::default();
+        let v = coastal_erosion(&g, &ocean, &mut z, &mut eroded, &params(), 2.0, &mut s);
+        let mut lowered = 0;
+        let mut volume = 0.0;
+        for i in 0..z.len() {
+            // What left the surface is what was eroded, and nothing is cut below the wave base.
+            assert!((before[i] - z[i] - eroded[i]).abs() < 1e-6, "sample {i}");
+            assert!(eroded[i] >= 0.0);
+            if eroded[i] > 0.0 {
+                lowered += 1;
+                assert!(!ocean[i], "a sea sample was cut");
+                assert!(
+                    g.edges(i).any(|e| ocean[g.neighbors[e] as usize]),
+                    "inland sample cut"
+                );
+                assert!(z[i] >= -0.05 - 1e-6, "cut below the wave base: {}", z[i]);
+            }
+            volume += eroded[i] as f64 * g.area_km2[i];
+        }
+        assert!(lowered > 100, "only {lowered} coastal samples cut");
+        assert!(
+            (v - volume).abs() <= 1e-6 * volume.max(1.0),
+            "{v} vs {volume}"
+        );
+        // Many steps plane the coast down to the wave base.
+        for _ in 0..200 {
+            coastal_erosion(&g, &ocean, &mut z, &mut eroded, &params(), 2.0, &mut s);
+        }
+        for i in 0..z.len() {
+            if eroded[i] > 0.0 {
+                assert!((z[i] + 0.05).abs() < 0.01, "not planed: {}", z[i]);
+            }
+        }
+    }
+
+    #[test]
+    fn a_wide_platform_shelters_its_coast() {
+        let mut cut = [0.0f64; 2];
+        for (k, shelf) in [0.0, 400.0].into_iter().enumerate() {
+            let (g, ocean, mut z) = planet(shelf);
+            let mut eroded = vec![0.0f32; z.len()];
+            cut[k] = coastal_erosion(
+                &g,
+                &ocean,
+                &mut z,
+                &mut eroded,
+                &params(),
+                2.0,
+                &mut CoastScratch::default(),
+            );
+        }
+        // 400 km of shallow water at W₀ = 40 km: e^-10 of the exposed coast's retreat.
+        assert!(cut[0] > 0.0);
+        assert!(
+            cut[1] < 1e-3 * cut[0],
+            "sheltered {} vs open {}",
+            cut[1],
+            cut[0]
+        );
+    }
+
+    #[test]
+    fn shallow_width_is_the_distance_to_open_water() {
+        let (g, ocean, z) = planet(300.0);
+        let mut s = CoastScratch::default();
+        shallow_width_km(&g, &ocean, &z, 0.2, &mut s);
+        let spacing = g.mean_spacing_km as f32;
+        let mut seen = 0;
+        for i in 0..g.len() {
+            if !ocean[i] {
+                assert!(s.width[i].is_infinite());
+            } else if z[i] < -1.0 {
+                assert_eq!(s.width[i], 0.0);
+            } else {
+                // A shallow sample: at most the band's width (plus one sample of slack), > 0.
+                assert!(
+                    s.width[i] > 0.0 && s.width[i] < 300.0 + 2.0 * spacing,
+                    "{}",
+                    s.width[i]
+                );
+                seen += 1;
+            }
+        }
+        assert!(seen > 100);
+    }
+}

@@ -16,6 +16,7 @@ use tectonic_planets::gpu::crust_reduce::{
     crust_reduce_cpu, crust_reduce_gpu, stats_from_reduction,
 };
 use tectonic_planets::gpu::erosion::{ErosionRates, erosion_dispatch};
+use tectonic_planets::gpu::isostasy::{IsostasyConstants, isostasy_dispatch};
 use tectonic_planets::gpu::resample_interpolate::{
     resample_interpolate_gpu, resample_interpolate_gpu_located,
 };
@@ -38,6 +39,9 @@ use tectonic_planets::systems::aging::aging_cpu;
 use tectonic_planets::systems::convergence::collision::collision_uplift_cpu;
 use tectonic_planets::systems::convergence::subduction::subduction_uplift_cpu;
 use tectonic_planets::systems::erosion::erosion_cpu;
+use tectonic_planets::systems::relief::isostasy::{
+    AgeDepthLaw, AgeDepthTable, IsostasyParams, isostasy_cpu, ocean_depth_km,
+};
 use tectonic_planets::systems::resample::{
     interpolate, interpolate as resample_interpolate_cpu, plate_geometry, resample_locate_cpu,
     resample_locate_gpu,
@@ -74,6 +78,7 @@ fn every_shader_validates_with_naga() {
         "aging",
         "collision_uplift",
         "erosion",
+        "isostasy",
         "resample_interpolate",
         "resample_locate",
         "subduction_uplift",
@@ -177,6 +182,270 @@ fn aging_kernel_matches_cpu_reference_bit_for_bit() {
             cpu_oga[i].to_bits(),
             "seed {seed}: orogeny age at {i} ({:?})",
             crust.orogeny[i]
+        );
+    }
+}
+
+/// Random isostasy inputs over `crust`: thickness (continental 10–80 km, oceanic T_oc plus up to
+/// 4 km of load), the smoothed root w (−5…+15 km, beyond the support on both sides), trench
+/// depths on a fifth of the samples, and the constants of `params` with a support S of 0.5–3 km.
+fn isostasy_case(crust: &mut Crust, rng: &mut SimRng) -> (IsostasyConstants, Vec<f32>, Vec<f32>) {
+    let n = crust.len();
+    let mut params = Params::default();
+    params.isostasy.max_flexural_support_km = 0.5 + 2.5 * rng.next_f64();
+    let iso = tectonic_planets::systems::relief::isostasy_params(&params);
+    let c = iso.constants(params.init.oceanic_thickness_km);
+    let mut w = vec![0.0f32; n];
+    let mut trench = vec![0.0f32; n];
+    for i in 0..n {
+        crust.thickness_km[i] = if crust.crust_type[i] == CrustType::Continental {
+            (10.0 + 70.0 * rng.next_f64()) as f32
+        } else {
+            (c.oceanic_thickness_km + 4.0 * rng.next_f64()) as f32
+        };
+        w[i] = (-5.0 + 20.0 * rng.next_f64()) as f32;
+        if rng.next_f64() < 0.2 {
+            trench[i] = (6.0 * rng.next_f64()) as f32;
+        }
+    }
+    (c, w, trench)
+}
+
+/// The f32 tolerance of one isostasy sample: 1e-6 km per km of the largest terms it adds (about
+/// 8 ulps of each; the kernel rounds after each of about four operations, the CPU once).
+fn isostasy_tolerance(
+    c: &IsostasyConstants,
+    crust: &Crust,
+    w: &[f32],
+    trench: &[f32],
+    i: usize,
+) -> f64 {
+    let t = crust.thickness_km[i] as f64;
+    let terms = if crust.crust_type[i] == CrustType::Oceanic {
+        8.0 + c.sediment_gain * (t - c.oceanic_thickness_km).abs()
+            + (w[i] as f64).abs()
+            + trench[i] as f64
+    } else {
+        // ×1.5: a submerged column is deepened by ρ_m/(ρ_m − ρ_w) ≈ 1.45.
+        1.5 * (c.ref_elevation_km.abs()
+            + 2.0 * (t - c.ref_thickness_km).abs()
+            + (w[i] as f64).abs())
+    };
+    1e-6 * (1.0 + terms)
+}
+
+#[test]
+fn isostasy_kernel_matches_cpu_reference() {
+    let Some(mut ctx) = gpu_or_skip("isostasy") else {
+        return;
+    };
+    let seed = fresh_seed("GPU_TEST_SEED");
+    let mut rng = SimRng::new(seed, 11);
+    let mut crust = random_crust(N, &mut rng);
+    let (c, w, trench) = isostasy_case(&mut crust, &mut rng);
+    // A few continental columns of no finite thickness keep their elevation; a few ages are
+    // not finite or out of the table (read as 0, clamped to 0..400 My).
+    let planted = [0, 1, 2, 3, 17, 4097, N / 2, N - 2, N - 1];
+    for (k, &i) in planted.iter().enumerate() {
+        if k % 2 == 0 {
+            crust.crust_type[i] = CrustType::Continental;
+            crust.thickness_km[i] = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][k % 3];
+        } else {
+            crust.crust_type[i] = CrustType::Oceanic;
+            crust.age_my[i] = [f32::NAN, -5.0, 1e6, f32::INFINITY][(k / 2) % 4];
+        }
+    }
+    let law = if rng.next_f64() < 0.5 {
+        AgeDepthLaw::ParsonsSclater
+    } else {
+        AgeDepthLaw::Gdh1
+    };
+    let table = AgeDepthTable::new(law, -0.3 + 0.6 * rng.next_f64());
+    // The host copy starts poisoned where the kernel writes, so a kernel that writes nothing
+    // fails; the columns of no finite thickness keep a known value.
+    ctx.sync_crust(&crust, None).expect("upload");
+    isostasy_dispatch(&mut ctx, &c, &table.samples(), &w, &trench).expect("dispatch");
+    let buf = ctx.crust_buffers().unwrap().elevation_km.clone();
+    let gpu = read_f32(&mut ctx, &buf, N);
+    let mut cpu = crust.elevation_km.clone();
+    isostasy_cpu(
+        &c,
+        &table,
+        &crust.crust_type,
+        &crust.thickness_km,
+        &crust.age_my,
+        &w,
+        &trench,
+        &mut cpu,
+    );
+    // The inputs exercise every branch: the support clamps on both sides (continents and
+    // ocean), submerged and dry columns, trenches, loads.
+    let s = c.max_support_km;
+    let (mut low, mut high, mut wet, mut dry, mut oc_clamped, mut trenched) = (0, 0, 0, 0, 0, 0);
+    for i in 0..N {
+        let t = crust.thickness_km[i] as f64;
+        let wi = w[i] as f64;
+        if crust.crust_type[i] == CrustType::Oceanic {
+            oc_clamped += usize::from(wi.abs() > s);
+            trenched += usize::from(trench[i] > 0.0);
+        } else if t.is_finite() {
+            let own = (t - c.ref_thickness_km) * c.root_ratio;
+            low += usize::from(wi < own - s);
+            high += usize::from(wi > own + s);
+            if cpu[i] < 0.0 {
+                wet += 1;
+            } else {
+                dry += 1;
+            }
+        }
+    }
+    for (what, count) in [
+        ("roots held up", low),
+        ("roots held down", high),
+        ("submerged columns", wet),
+        ("dry columns", dry),
+        ("ocean flexure clamped", oc_clamped),
+        ("trenches", trenched),
+    ] {
+        assert!(
+            count > N / 50,
+            "seed {seed}: inputs too tame: {count} {what}"
+        );
+    }
+    let mut worst = 0.0f64;
+    for i in 0..N {
+        let t = crust.thickness_km[i];
+        if crust.crust_type[i] == CrustType::Continental && !t.is_finite() {
+            assert_eq!(
+                gpu[i].to_bits(),
+                crust.elevation_km[i].to_bits(),
+                "seed {seed}: sample {i} (thickness {t}) was written"
+            );
+            continue;
+        }
+        let d = (gpu[i] as f64 - cpu[i] as f64).abs();
+        let tol = isostasy_tolerance(&c, &crust, &w, &trench, i);
+        worst = worst.max(d / tol);
+        assert!(
+            d <= tol,
+            "seed {seed}: sample {i} ({:?}, T {t}, age {}, w {}, trench {}): gpu {} cpu {} \
+             (tolerance {tol:e} km)",
+            crust.crust_type[i],
+            crust.age_my[i],
+            w[i],
+            trench[i],
+            gpu[i],
+            cpu[i]
+        );
+    }
+    eprintln!(
+        "isostasy: seed {seed}, {law:?}, S {s:.2} km, worst error {worst:.3} of the tolerance"
+    );
+}
+
+#[test]
+fn age_depth_part_of_the_isostasy_kernel_matches_the_table() {
+    let Some(mut ctx) = gpu_or_skip("age-depth") else {
+        return;
+    };
+    let seed = fresh_seed("GPU_TEST_SEED");
+    let mut rng = SimRng::new(seed, 12);
+    // Unloaded ocean floor (T = T_oc), no flexure, no trench: the elevation is −depth(age).
+    let mut crust = Crust::with_len(N);
+    let iso = IsostasyParams {
+        max_support_km: 1.5,
+        ..IsostasyParams::default()
+    };
+    let c = iso.constants(7.0);
+    for i in 0..N {
+        crust.crust_type[i] = CrustType::Oceanic;
+        crust.thickness_km[i] = 7.0;
+        crust.elevation_km[i] = f32::NAN;
+        // Every 50th sample sits on a table node (and the end of the table), the others
+        // anywhere in 0..420 My, weighted to the young floor where the law is steepest.
+        crust.age_my[i] = if i % 50 == 0 {
+            ((i / 50) % 8_002) as f32 * 0.05
+        } else {
+            (420.0 * rng.next_f64().powi(2)) as f32
+        };
+    }
+    for (k, a) in [
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        -1.0,
+        0.0,
+        400.0,
+        1e9,
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        crust.age_my[7 + 1000 * k] = a;
+    }
+    let zeros = vec![0.0f32; N];
+    ctx.sync_crust(&crust, None).expect("upload");
+    let buf = ctx.crust_buffers().unwrap().elevation_km.clone();
+    for law in [AgeDepthLaw::Gdh1, AgeDepthLaw::ParsonsSclater] {
+        let offset = -0.3 + 0.6 * rng.next_f64();
+        let table = AgeDepthTable::new(law, offset);
+        isostasy_dispatch(&mut ctx, &c, &table.samples(), &zeros, &zeros).expect("dispatch");
+        let gpu = read_f32(&mut ctx, &buf, N);
+        let mut cpu = vec![f32::NAN; N];
+        isostasy_cpu(
+            &c,
+            &table,
+            &crust.crust_type,
+            &crust.thickness_km,
+            &crust.age_my,
+            &zeros,
+            &zeros,
+            &mut cpu,
+        );
+        let (mut worst, mut worst_law) = (0.0f64, 0.0f64);
+        for i in 0..N {
+            let age = crust.age_my[i];
+            // Tolerance: 2e-6 km (2 mm) for the table's f32 values (depths up to 7 km: ulp
+            // 4.8e-7 km) and three f32 operations of the interpolation, plus the f32 position
+            // in the table, x = age/step, off by up to an ulp of x, times the depth step of its
+            // interval (up to 80 m: the young floor of GDH1, and the jump of Parsons–Sclater's
+            // law at 70 My).
+            let samples = table.samples();
+            let x = if age.is_finite() {
+                (age as f64).clamp(0.0, 400.0) / samples.step_my
+            } else {
+                0.0
+            };
+            let k = (x as usize).min(samples.depth_km.len() - 2);
+            let step_km = (samples.depth_km[k + 1] - samples.depth_km[k]).abs();
+            let tol = 2e-6 + f32::EPSILON as f64 * x * step_km;
+            let d = (gpu[i] as f64 - cpu[i] as f64).abs();
+            worst = worst.max(d / tol);
+            assert!(
+                d <= tol,
+                "seed {seed}: {law:?} offset {offset}: age {age} My (sample {i}): gpu {} cpu {} \
+                 (tolerance {tol:e} km)",
+                gpu[i],
+                cpu[i]
+            );
+            // On the table's nodes (every 50th sample, and the planted ages) both are the
+            // published law itself (between nodes the table interpolates linearly, on both
+            // sides); an age on a node in f32 is off it by up to an ulp.
+            if i % 50 == 0 || !age.is_finite() || !(0.0..400.0).contains(&age) {
+                let node = x.round();
+                let expected = -ocean_depth_km(node * samples.step_my, law, offset);
+                let dl = (gpu[i] as f64 - expected).abs();
+                worst_law = worst_law.max(dl);
+                assert!(
+                    dl <= tol + (x - node).abs() * step_km,
+                    "seed {seed}: {law:?}: age {age} My: gpu {} law {expected}",
+                    gpu[i]
+                );
+            }
+        }
+        eprintln!(
+            "age-depth {law:?}: seed {seed}, worst {worst:.3} of the tolerance against the table, \
+             {worst_law:e} km against the law on its nodes"
         );
     }
 }

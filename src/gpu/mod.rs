@@ -49,6 +49,7 @@ pub mod collision_uplift;
 pub mod crust_gather;
 pub mod crust_reduce;
 pub mod erosion;
+pub mod isostasy;
 pub mod resample_interpolate;
 pub mod resample_locate;
 pub mod sources_patch;

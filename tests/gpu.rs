@@ -39,6 +39,10 @@ use tectonic_planets::systems::aging::aging_cpu;
 use tectonic_planets::systems::convergence::collision::collision_uplift_cpu;
 use tectonic_planets::systems::convergence::subduction::subduction_uplift_cpu;
 use tectonic_planets::systems::erosion::erosion_cpu;
+use tectonic_planets::systems::relief::diffusion::{
+    DiffusionScratch, diffuse_land, diffuse_land_gpu,
+};
+use tectonic_planets::systems::relief::graph::ReliefGraph;
 use tectonic_planets::systems::relief::isostasy::{
     AgeDepthLaw, AgeDepthTable, IsostasyParams, isostasy_cpu, ocean_depth_km,
 };
@@ -77,6 +81,7 @@ fn every_shader_validates_with_naga() {
     for expected in [
         "aging",
         "collision_uplift",
+        "diffusion",
         "erosion",
         "isostasy",
         "resample_interpolate",
@@ -447,6 +452,234 @@ fn age_depth_part_of_the_isostasy_kernel_matches_the_table() {
             "age-depth {law:?}: seed {seed}, worst {worst:.3} of the tolerance against the table, \
              {worst_law:e} km against the law on its nodes"
         );
+    }
+}
+
+/// A reference mesh's relief graph and a relief over it: land and sea from a few random waves
+/// (−4…+6 km, a third of the area sea), land below sea level in places (lakes).
+fn diffusion_case(rng: &mut SimRng) -> (SphereMesh, ReliefGraph, Vec<f32>, Vec<bool>) {
+    let mesh = SphereMesh::fibonacci(N, 0.3, rng.next_u64(), 6371.0).expect("mesh");
+    let g = ReliefGraph::new(
+        &mesh.positions,
+        &mesh.neighbor_start,
+        &mesh.neighbors,
+        Some(&mesh.triangles),
+        Some(&mesh.area_km2),
+        mesh.radius_km,
+    );
+    let waves: Vec<(glam::DVec3, f64, f64)> = (0..6)
+        .map(|_| {
+            let d = glam::DVec3::new(
+                rng.next_f64() - 0.5,
+                rng.next_f64() - 0.5,
+                rng.next_f64() - 0.5,
+            )
+            .normalize();
+            (
+                d,
+                2.0 + 10.0 * rng.next_f64(),
+                std::f64::consts::TAU * rng.next_f64(),
+            )
+        })
+        .collect();
+    let mut z = vec![0.0f32; N];
+    let mut ocean = vec![false; N];
+    for i in 0..N {
+        let p = mesh.positions[i];
+        let v: f64 = waves
+            .iter()
+            .map(|(d, k, ph)| (k * p.dot(*d) + ph).sin())
+            .sum::<f64>();
+        let h = 1.0 + 1.6 * v + 0.3 * (rng.next_f64() - 0.5);
+        ocean[i] = h < 0.0 && rng.next_f64() < 0.95;
+        z[i] = h.clamp(-4.0, 6.0) as f32;
+    }
+    (mesh, g, z, ocean)
+}
+
+#[test]
+fn diffusion_kernel_matches_cpu_reference_and_conserves_mass() {
+    let Some(mut ctx) = gpu_or_skip("diffusion") else {
+        return;
+    };
+    let seed = fresh_seed("GPU_TEST_SEED");
+    let mut rng = SimRng::new(seed, 13);
+    let (_mesh, g, z0, ocean) = diffusion_case(&mut rng);
+    let mut crust = Crust::with_len(N);
+    crust.elevation_km = vec![f32::NAN; N];
+    ctx.sync_crust(&crust, None).expect("upload");
+    let max_w = (0..N)
+        .map(|i| g.edges(i).map(|e| g.edge_weight[e] as f64).sum::<f64>() / g.area_km2[i])
+        .fold(0.0, f64::max);
+    let dt = 2.0;
+    let land = (0..N).filter(|&i| !ocean[i]).count();
+    let lakes = (0..N).filter(|&i| !ocean[i] && z0[i] < 0.0).count();
+    assert!(
+        land > N / 3 && land < N * 9 / 10,
+        "seed {seed}: {land} land samples"
+    );
+    assert!(
+        lakes > 100,
+        "seed {seed}: {lakes} land samples below sea level"
+    );
+    // Land samples of no finite elevation keep it (and stand at 0 for their neighbours): the
+    // same input with a few of them, for the parity; without, for the mass balance (a sample
+    // whose result is dropped breaks it on the CPU too).
+    let mut holes = z0.clone();
+    for k in 0..40 {
+        let i = 13 + 2_477 * k;
+        if !ocean[i] {
+            holes[i] = [f32::NAN, f32::INFINITY][k % 2];
+        }
+    }
+    // One, two and five sub-steps: both ends of the ping-pong, and the graph reused.
+    for substeps in [1u32, 2, 5] {
+        let kappa = 0.98 * substeps as f64 * 0.5 / (dt * max_w);
+        for (input, z_in) in [("with holes", &holes), ("whole", &z0)] {
+            let mut cpu_z = z_in.clone();
+            let mut cpu_d = vec![f32::NAN; N];
+            let mut cpu_o = vec![0.0f64; N];
+            let cpu = diffuse_land(
+                &g,
+                &mut cpu_z,
+                &ocean,
+                kappa,
+                dt,
+                &mut cpu_d,
+                &mut cpu_o,
+                &mut DiffusionScratch::default(),
+            );
+            assert_eq!(cpu.substeps, substeps);
+            let mut gpu_z = z_in.clone();
+            let mut gpu_d = vec![f32::NAN; N];
+            let mut gpu_o = vec![0.0f64; N];
+            let gpu = diffuse_land_gpu(
+                &mut ctx,
+                &g,
+                &mut gpu_z,
+                &ocean,
+                kappa,
+                dt,
+                &mut gpu_d,
+                &mut gpu_o,
+                &mut DiffusionScratch::default(),
+            )
+            .expect("dispatch")
+            .expect("something to diffuse");
+            assert_eq!(gpu.substeps, substeps);
+            let what = format!("seed {seed}, {substeps} sub-steps, input {input}");
+            // The device's elevation is the host's, bit for bit, everywhere (the system
+            // declares the write done on that basis): diffused land, untouched sea and
+            // non-finite land.
+            let buf = ctx.crust_buffers().unwrap().elevation_km.clone();
+            let resident = read_f32(&mut ctx, &buf, N);
+            for i in 0..N {
+                assert_eq!(
+                    resident[i].to_bits(),
+                    gpu_z[i].to_bits(),
+                    "{what}: sample {i}: device {} host {}",
+                    resident[i],
+                    gpu_z[i]
+                );
+                if ocean[i] || !z_in[i].is_finite() {
+                    assert_eq!(gpu_z[i].to_bits(), z_in[i].to_bits(), "{what}: sample {i}");
+                    assert_eq!(gpu_d[i], 0.0, "{what}: sample {i}");
+                } else {
+                    assert_eq!(gpu_d[i], gpu_z[i] - z_in[i], "{what}: sample {i}");
+                }
+            }
+            // It diffused: most land moved, and the coast received.
+            let moved = (0..N).filter(|&i| cpu_d[i].abs() > 1e-3).count();
+            assert!(moved > land / 2, "{what}: only {moved} samples moved");
+            let coast = (0..N).filter(|&i| cpu_o[i] > 0.0).count();
+            assert!(coast > 1000, "{what}: {coast} coast samples received");
+            // Per sample: four f32 ulps of the relief per sub-step (4·2⁻²³ km per km of the
+            // sample's height plus the ±6 km of its neighbours): each sub-step rounds a few
+            // terms up to the relief in f32 (the WGSL division allows 2.5 ulps); the CPU sums
+            // in f64 and rounds once.
+            let mut worst = 0.0f64;
+            for i in 0..N {
+                if !z_in[i].is_finite() {
+                    continue;
+                }
+                let tol = 4.0
+                    * f32::EPSILON as f64
+                    * substeps as f64
+                    * (1.0 + z_in[i].abs() as f64 + 6.0);
+                let d = (gpu_z[i] as f64 - cpu_z[i] as f64).abs();
+                worst = worst.max(d / tol);
+                assert!(
+                    d <= tol,
+                    "{what}: sample {i} (ocean {}, from {}): gpu {} cpu {}",
+                    ocean[i],
+                    z_in[i],
+                    gpu_z[i],
+                    cpu_z[i]
+                );
+                // Receipts: relative 1e-5 per sub-step (f32 sums of a few terms, accumulated
+                // over the sub-steps).
+                let r = (gpu_o[i] - cpu_o[i]).abs();
+                assert!(
+                    r <= 1e-5 * substeps as f64 * cpu_o[i].abs() + 1e-3,
+                    "{what}: receipt of sample {i}: gpu {} cpu {}",
+                    gpu_o[i],
+                    cpu_o[i]
+                );
+            }
+            assert!(
+                (gpu.to_ocean_km3 - cpu.to_ocean_km3).abs()
+                    <= 1e-5 * substeps as f64 * cpu.to_ocean_km3,
+                "{what}: to the sea gpu {} cpu {}",
+                gpu.to_ocean_km3,
+                cpu.to_ocean_km3
+            );
+            if input != "whole" {
+                eprintln!("diffusion: {what}: worst {worst:.3} of the tolerance");
+                continue;
+            }
+            // Mass: what the land lost equals what it gained plus what crossed the coast, on
+            // the device as on the CPU, within the f32 rounding of the stored elevations: each
+            // land sample's elevation is rounded once per sub-step and once more for its
+            // change, by at most half an ulp (≤ 2⁻²⁴·|h|) times its area. Those roundings are
+            // independent from sample to sample, so the sum is bounded by ten standard
+            // deviations of their sum (a worst case, every rounding one way, would be about a
+            // thousand times as large and let a broken coast pass).
+            let balance = |d: &[f32], o: &[f64]| -> f64 {
+                let land: f64 = (0..N)
+                    .filter(|&i| !ocean[i])
+                    .map(|i| d[i] as f64 * g.area_km2[i])
+                    .sum();
+                land + o.iter().sum::<f64>()
+            };
+            let variance: f64 = (0..N)
+                .filter(|&i| !ocean[i])
+                .map(|i| {
+                    let half_ulp = 0.5
+                        * f32::EPSILON as f64
+                        * (z_in[i].abs().max(gpu_z[i].abs()) as f64)
+                        * g.area_km2[i];
+                    // Uniform in ±half an ulp: variance (2·half)²/12.
+                    (substeps + 1) as f64 * half_ulp * half_ulp / 3.0
+                })
+                .sum();
+            let rounding = 10.0 * variance.sqrt();
+            let (gb, cb) = (balance(&gpu_d, &gpu_o), balance(&cpu_d, &cpu_o));
+            let moved_km3 = gpu.lowered_km3 + gpu.raised_km3;
+            eprintln!(
+                "diffusion: {what}, {coast} coast samples: worst {worst:.3} of the tolerance; \
+                 moved {moved_km3:.3e} km³, to the sea {:.3e} km³; imbalance gpu {gb:.3e} km³, \
+                 cpu {cb:.3e} km³, bound {rounding:.3e} km³",
+                gpu.to_ocean_km3
+            );
+            assert!(
+                gb.abs() <= rounding,
+                "{what}: the device lost {gb} km³ (bound {rounding})"
+            );
+            assert!(
+                gpu.to_ocean_km3 > 1e-3 * moved_km3,
+                "{what}: nothing crossed the coast"
+            );
+        }
     }
 }
 

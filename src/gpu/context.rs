@@ -34,6 +34,8 @@ pub struct GpuTraffic {
     pub interpolations: u64,
     /// Isostasy passes (the elevation from the crust) run on the device.
     pub isostasy_passes: u64,
+    /// Land diffusion passes (one per call, whatever its sub-steps) run on the device.
+    pub diffusion_passes: u64,
 }
 
 /// A kernel's pipeline and whatever it keeps on the device between dispatches (uniform buffers,

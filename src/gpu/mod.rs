@@ -48,6 +48,7 @@ pub mod amplify;
 pub mod collision_uplift;
 pub mod crust_gather;
 pub mod crust_reduce;
+pub mod diffusion;
 pub mod erosion;
 pub mod isostasy;
 pub mod resample_interpolate;

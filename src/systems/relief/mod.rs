@@ -45,7 +45,7 @@ pub mod stream_power;
 use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 
-use self::diffusion::{DiffusionBudget, DiffusionScratch, diffuse_land};
+use self::diffusion::{DiffusionBudget, DiffusionScratch, diffuse_land, diffuse_land_gpu};
 use self::drainage::{Drainage, sea_mask};
 use self::graph::ReliefGraph;
 use self::isostasy::{AgeDepthLaw, AgeDepthTable, IsostasyParams, RegionalIsostasy, isostasy_cpu};
@@ -297,9 +297,22 @@ pub fn erode_rivers(
         return;
     }
     const WRITES: FieldMask = FieldMask(FieldMask::ELEVATION.0 | FieldMask::THICKNESS.0);
-    let Some(declared) = before_write(&mut crust, &mut gpu, FieldMask::NONE, WRITES) else {
+    let Some(mut declared) = before_write(&mut crust, &mut gpu, FieldMask::NONE, WRITES) else {
         return;
     };
+    // On the GPU backend the diffusion runs on the device, on the resident elevation: the
+    // device must hold the rest of the crust as the host does (it does unless a CPU system
+    // wrote the crust undeclared earlier in the step; then every stale field came down above,
+    // and the whole crust goes up now rather than at the next kernel).
+    if let Some(g) = gpu.as_mut()
+        && !declared
+        && g.failure.is_none()
+    {
+        let tick = crust.last_changed();
+        if run_or_record(g, |g| g.sync_crust(&crust, Some(tick))) {
+            declared = g.can_declare_host_write(WRITES, crust.len(), tick);
+        }
+    }
     let dt = params.time.time_step_my;
     let spl = stream_power_params(&params);
     let kappa = params.rivers.hillslope_diffusivity_km2_per_my;
@@ -353,16 +366,52 @@ pub fn erode_rivers(
             .sum();
         flux.incised_km3 += extra;
     }
-    flux.diffusion = diffuse_land(
-        g,
-        &mut crust.elevation_km,
-        &network.drainage.ocean,
-        kappa,
-        dt,
-        &mut flux.diffusion_km,
-        &mut flux.to_ocean_km3,
-        &mut state.diffusion,
-    );
+    // Hillslope diffusion: on the device when the write is declared (the device then holds the
+    // diffused elevation, and only the thickness goes up at the end), else on the CPU.
+    let mut on_device = None;
+    if declared
+        && let Some(ctx) = gpu.as_mut()
+        && ctx.failure.is_none()
+    {
+        match diffuse_land_gpu(
+            ctx,
+            g,
+            &mut crust.elevation_km,
+            &network.drainage.ocean,
+            kappa,
+            dt,
+            &mut flux.diffusion_km,
+            &mut flux.to_ocean_km3,
+            &mut state.diffusion,
+        ) {
+            Ok(budget) => on_device = budget,
+            Err(e) => {
+                // The resident elevation is lost: the step stops with the error, and the next
+                // kernel would upload the whole crust.
+                ctx.invalidate_crust();
+                ctx.record_failure(e);
+                declared = false;
+            }
+        }
+    }
+    let uploaded = if on_device.is_some() {
+        FieldMask::THICKNESS
+    } else {
+        WRITES
+    };
+    flux.diffusion = match on_device {
+        Some(budget) => budget,
+        None => diffuse_land(
+            g,
+            &mut crust.elevation_km,
+            &network.drainage.ocean,
+            kappa,
+            dt,
+            &mut flux.diffusion_km,
+            &mut flux.to_ocean_km3,
+            &mut state.diffusion,
+        ),
+    };
     crust
         .thickness_km
         .par_iter_mut()
@@ -371,7 +420,7 @@ pub fn erode_rivers(
         .for_each(|(t, (&e, &d))| *t += d - e);
     flux.total_eroded_km3 += flux.eroded_km3();
     flux.total_deposited_km3 += flux.diffusion.raised_km3;
-    after_write(&crust_res, &mut gpu, WRITES, declared);
+    after_write(&crust_res, &mut gpu, uploaded, declared);
 }
 
 /// Lays down what the rivers and slopes carried (phenomenon `sediment`): in lakes, on the shelf,

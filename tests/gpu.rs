@@ -39,6 +39,7 @@ use tectonic_planets::systems::aging::aging_cpu;
 use tectonic_planets::systems::convergence::collision::collision_uplift_cpu;
 use tectonic_planets::systems::convergence::subduction::subduction_uplift_cpu;
 use tectonic_planets::systems::erosion::erosion_cpu;
+use tectonic_planets::systems::relief::DrainageNetwork;
 use tectonic_planets::systems::relief::diffusion::{
     DiffusionScratch, diffuse_land, diffuse_land_gpu,
 };
@@ -1628,6 +1629,75 @@ fn a_steady_gpu_step_reads_back_a_few_bytes_per_sample() {
         // The pulls do not move the crust's change tick, so nothing goes up in full again.
         assert_eq!(uploads, 0, "{measured:?}");
     }
+}
+
+#[test]
+fn relief_on_the_gpu_backend_runs_isostasy_and_diffusion_on_the_device() {
+    if gpu_or_skip("relief on the device").is_none() {
+        return;
+    }
+    let n = 20_000usize;
+    let mut sim = gpu_sim(n as u64, 9, false);
+    sim.step().expect("first step");
+    let mut measured = Vec::new();
+    for _ in 0..12 {
+        let before = sim.world().resource::<GpuContext>().traffic;
+        let fronts = sim.world().resource::<FrontPoints>().len();
+        let (resamplings, since) = (sim.clock().resamplings, sim.clock().steps_since_resample);
+        sim.step().expect("step");
+        let gpu = sim.world().resource::<GpuContext>();
+        let after = gpu.traffic;
+        // Every step ran the isostatic combine and the land diffusion on the device.
+        assert_eq!(
+            after.isostasy_passes,
+            before.isostasy_passes + 1,
+            "{after:?}"
+        );
+        assert_eq!(
+            after.diffusion_passes,
+            before.diffusion_passes + 1,
+            "{after:?}"
+        );
+        if sim.clock().resamplings != resamplings || since == 0 {
+            continue;
+        }
+        // Steady step: the isostatic elevation stays on the device (nothing read back).
+        assert!(
+            gpu.device_newer().contains(FieldMask::ELEVATION),
+            "{:?}",
+            gpu.device_newer()
+        );
+        assert_eq!(after.crust_uploads, before.crust_uploads, "{after:?}");
+        // What crosses the bus (docs/gpu.md, "Relief on the GPU"), with the coast of this
+        // step's sea.
+        let coast = {
+            let ocean = &sim.world().resource::<DrainageNetwork>().drainage.ocean;
+            let mesh = sim.mesh();
+            (0..n)
+                .filter(|&j| ocean[j] && mesh.neighbors_of(j).iter().any(|&i| !ocean[i as usize]))
+                .count()
+        };
+        let (n4, fronts, coast) = (4 * n as u64, fronts as u64, coast as u64);
+        let up = after.uploaded_bytes - before.uploaded_bytes;
+        let down = after.downloaded_bytes - before.downloaded_bytes;
+        // Up: the elevation to diffuse, the ocean bits and the coast list; the thickness after
+        // the rivers and after the sediment (declared writes); the smoothed root and the trench
+        // depth; the front table (32 B a point) and gather indices (12 B a point); uniforms.
+        let up_bound = 5 * n4 + (n as u64).div_ceil(32) * 4 + 4 * coast + 44 * fronts + 4096;
+        // Down: the elevation the isostasy left on the device (pulled by the drainage), the
+        // thickness the uplift kernel thickened (pulled by the rivers), the age (pulled by the
+        // sediment), the diffused elevation and the coast's receipts; the reduction (24 B and
+        // the land bitmask) and the gathered front elevations (12 B a point).
+        let down_bound = 4 * n4 + 4 * coast + 24 + 4 * (n as u64).div_ceil(32) + 12 * fronts;
+        assert!(
+            up <= up_bound,
+            "{up} B up, bound {up_bound} ({coast} coast samples)"
+        );
+        assert!(down <= down_bound, "{down} B down, bound {down_bound}");
+        measured.push((up as f64 / n as f64, down as f64 / n as f64, coast));
+    }
+    eprintln!("steady relief steps (up B/sample, down B/sample, coast samples): {measured:?}");
+    assert!(measured.len() >= 5, "{measured:?}");
 }
 
 fn write_one_elevation(mut crust: ResMut<Crust>) {

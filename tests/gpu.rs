@@ -16,6 +16,7 @@ use tectonic_planets::gpu::crust_reduce::{
     crust_reduce_cpu, crust_reduce_gpu, stats_from_reduction,
 };
 use tectonic_planets::gpu::erosion::{ErosionRates, erosion_dispatch};
+use tectonic_planets::gpu::isostasy::{IsostasyConstants, isostasy_dispatch};
 use tectonic_planets::gpu::resample_interpolate::{
     resample_interpolate_gpu, resample_interpolate_gpu_located,
 };
@@ -38,6 +39,14 @@ use tectonic_planets::systems::aging::aging_cpu;
 use tectonic_planets::systems::convergence::collision::collision_uplift_cpu;
 use tectonic_planets::systems::convergence::subduction::subduction_uplift_cpu;
 use tectonic_planets::systems::erosion::erosion_cpu;
+use tectonic_planets::systems::relief::DrainageNetwork;
+use tectonic_planets::systems::relief::diffusion::{
+    DiffusionScratch, diffuse_land, diffuse_land_gpu,
+};
+use tectonic_planets::systems::relief::graph::ReliefGraph;
+use tectonic_planets::systems::relief::isostasy::{
+    AgeDepthLaw, AgeDepthTable, IsostasyParams, isostasy_cpu, ocean_depth_km,
+};
 use tectonic_planets::systems::resample::{
     interpolate, interpolate as resample_interpolate_cpu, plate_geometry, resample_locate_cpu,
     resample_locate_gpu,
@@ -73,7 +82,9 @@ fn every_shader_validates_with_naga() {
     for expected in [
         "aging",
         "collision_uplift",
+        "diffusion",
         "erosion",
+        "isostasy",
         "resample_interpolate",
         "resample_locate",
         "subduction_uplift",
@@ -178,6 +189,498 @@ fn aging_kernel_matches_cpu_reference_bit_for_bit() {
             "seed {seed}: orogeny age at {i} ({:?})",
             crust.orogeny[i]
         );
+    }
+}
+
+/// Random isostasy inputs over `crust`: thickness (continental 10–80 km, oceanic T_oc plus up to
+/// 4 km of load), the smoothed root w (−5…+15 km, beyond the support on both sides), trench
+/// depths on a fifth of the samples, and the constants of `params` with a support S of 0.5–3 km.
+fn isostasy_case(crust: &mut Crust, rng: &mut SimRng) -> (IsostasyConstants, Vec<f32>, Vec<f32>) {
+    let n = crust.len();
+    let mut params = Params::default();
+    params.isostasy.max_flexural_support_km = 0.5 + 2.5 * rng.next_f64();
+    let iso = tectonic_planets::systems::relief::isostasy_params(&params);
+    let c = iso.constants(params.init.oceanic_thickness_km);
+    let mut w = vec![0.0f32; n];
+    let mut trench = vec![0.0f32; n];
+    for i in 0..n {
+        crust.thickness_km[i] = if crust.crust_type[i] == CrustType::Continental {
+            (10.0 + 70.0 * rng.next_f64()) as f32
+        } else {
+            (c.oceanic_thickness_km + 4.0 * rng.next_f64()) as f32
+        };
+        w[i] = (-5.0 + 20.0 * rng.next_f64()) as f32;
+        if rng.next_f64() < 0.2 {
+            trench[i] = (6.0 * rng.next_f64()) as f32;
+        }
+    }
+    (c, w, trench)
+}
+
+/// The f32 tolerance of one isostasy sample: 1e-6 km per km of the largest terms it adds (about
+/// 8 ulps of each; the kernel rounds after each of about four operations, the CPU once).
+fn isostasy_tolerance(
+    c: &IsostasyConstants,
+    crust: &Crust,
+    w: &[f32],
+    trench: &[f32],
+    i: usize,
+) -> f64 {
+    let t = crust.thickness_km[i] as f64;
+    let terms = if crust.crust_type[i] == CrustType::Oceanic {
+        8.0 + c.sediment_gain * (t - c.oceanic_thickness_km).abs()
+            + (w[i] as f64).abs()
+            + trench[i] as f64
+    } else {
+        // ×1.5: a submerged column is deepened by ρ_m/(ρ_m − ρ_w) ≈ 1.45.
+        1.5 * (c.ref_elevation_km.abs()
+            + 2.0 * (t - c.ref_thickness_km).abs()
+            + (w[i] as f64).abs())
+    };
+    1e-6 * (1.0 + terms)
+}
+
+#[test]
+fn isostasy_kernel_matches_cpu_reference() {
+    let Some(mut ctx) = gpu_or_skip("isostasy") else {
+        return;
+    };
+    let seed = fresh_seed("GPU_TEST_SEED");
+    let mut rng = SimRng::new(seed, 11);
+    let mut crust = random_crust(N, &mut rng);
+    let (c, w, trench) = isostasy_case(&mut crust, &mut rng);
+    // A few continental columns of no finite thickness keep their elevation; a few ages are
+    // not finite or out of the table (read as 0, clamped to 0..400 My).
+    let planted = [0, 1, 2, 3, 17, 4097, N / 2, N - 2, N - 1];
+    for (k, &i) in planted.iter().enumerate() {
+        if k % 2 == 0 {
+            crust.crust_type[i] = CrustType::Continental;
+            crust.thickness_km[i] = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][k % 3];
+        } else {
+            crust.crust_type[i] = CrustType::Oceanic;
+            crust.age_my[i] = [f32::NAN, -5.0, 1e6, f32::INFINITY][(k / 2) % 4];
+        }
+    }
+    let law = if rng.next_f64() < 0.5 {
+        AgeDepthLaw::ParsonsSclater
+    } else {
+        AgeDepthLaw::Gdh1
+    };
+    let table = AgeDepthTable::new(law, -0.3 + 0.6 * rng.next_f64());
+    // The host copy starts poisoned where the kernel writes, so a kernel that writes nothing
+    // fails; the columns of no finite thickness keep a known value.
+    ctx.sync_crust(&crust, None).expect("upload");
+    isostasy_dispatch(&mut ctx, &c, &table.samples(), &w, &trench).expect("dispatch");
+    let buf = ctx.crust_buffers().unwrap().elevation_km.clone();
+    let gpu = read_f32(&mut ctx, &buf, N);
+    let mut cpu = crust.elevation_km.clone();
+    isostasy_cpu(
+        &c,
+        &table,
+        &crust.crust_type,
+        &crust.thickness_km,
+        &crust.age_my,
+        &w,
+        &trench,
+        &mut cpu,
+    );
+    // The inputs exercise every branch: the support clamps on both sides (continents and
+    // ocean), submerged and dry columns, trenches, loads.
+    let s = c.max_support_km;
+    let (mut low, mut high, mut wet, mut dry, mut oc_clamped, mut trenched) = (0, 0, 0, 0, 0, 0);
+    for i in 0..N {
+        let t = crust.thickness_km[i] as f64;
+        let wi = w[i] as f64;
+        if crust.crust_type[i] == CrustType::Oceanic {
+            oc_clamped += usize::from(wi.abs() > s);
+            trenched += usize::from(trench[i] > 0.0);
+        } else if t.is_finite() {
+            let own = (t - c.ref_thickness_km) * c.root_ratio;
+            low += usize::from(wi < own - s);
+            high += usize::from(wi > own + s);
+            if cpu[i] < 0.0 {
+                wet += 1;
+            } else {
+                dry += 1;
+            }
+        }
+    }
+    for (what, count) in [
+        ("roots held up", low),
+        ("roots held down", high),
+        ("submerged columns", wet),
+        ("dry columns", dry),
+        ("ocean flexure clamped", oc_clamped),
+        ("trenches", trenched),
+    ] {
+        assert!(
+            count > N / 50,
+            "seed {seed}: inputs too tame: {count} {what}"
+        );
+    }
+    let mut worst = 0.0f64;
+    for i in 0..N {
+        let t = crust.thickness_km[i];
+        if crust.crust_type[i] == CrustType::Continental && !t.is_finite() {
+            assert_eq!(
+                gpu[i].to_bits(),
+                crust.elevation_km[i].to_bits(),
+                "seed {seed}: sample {i} (thickness {t}) was written"
+            );
+            continue;
+        }
+        let d = (gpu[i] as f64 - cpu[i] as f64).abs();
+        let tol = isostasy_tolerance(&c, &crust, &w, &trench, i);
+        worst = worst.max(d / tol);
+        assert!(
+            d <= tol,
+            "seed {seed}: sample {i} ({:?}, T {t}, age {}, w {}, trench {}): gpu {} cpu {} \
+             (tolerance {tol:e} km)",
+            crust.crust_type[i],
+            crust.age_my[i],
+            w[i],
+            trench[i],
+            gpu[i],
+            cpu[i]
+        );
+    }
+    eprintln!(
+        "isostasy: seed {seed}, {law:?}, S {s:.2} km, worst error {worst:.3} of the tolerance"
+    );
+}
+
+#[test]
+fn age_depth_part_of_the_isostasy_kernel_matches_the_table() {
+    let Some(mut ctx) = gpu_or_skip("age-depth") else {
+        return;
+    };
+    let seed = fresh_seed("GPU_TEST_SEED");
+    let mut rng = SimRng::new(seed, 12);
+    // Unloaded ocean floor (T = T_oc), no flexure, no trench: the elevation is −depth(age).
+    let mut crust = Crust::with_len(N);
+    let iso = IsostasyParams {
+        max_support_km: 1.5,
+        ..IsostasyParams::default()
+    };
+    let c = iso.constants(7.0);
+    for i in 0..N {
+        crust.crust_type[i] = CrustType::Oceanic;
+        crust.thickness_km[i] = 7.0;
+        crust.elevation_km[i] = f32::NAN;
+        // Every 50th sample sits on a table node (and the end of the table), the others
+        // anywhere in 0..420 My, weighted to the young floor where the law is steepest.
+        crust.age_my[i] = if i % 50 == 0 {
+            ((i / 50) % 8_002) as f32 * 0.05
+        } else {
+            (420.0 * rng.next_f64().powi(2)) as f32
+        };
+    }
+    for (k, a) in [
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        -1.0,
+        0.0,
+        400.0,
+        1e9,
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        crust.age_my[7 + 1000 * k] = a;
+    }
+    let zeros = vec![0.0f32; N];
+    ctx.sync_crust(&crust, None).expect("upload");
+    let buf = ctx.crust_buffers().unwrap().elevation_km.clone();
+    for law in [AgeDepthLaw::Gdh1, AgeDepthLaw::ParsonsSclater] {
+        let offset = -0.3 + 0.6 * rng.next_f64();
+        let table = AgeDepthTable::new(law, offset);
+        isostasy_dispatch(&mut ctx, &c, &table.samples(), &zeros, &zeros).expect("dispatch");
+        let gpu = read_f32(&mut ctx, &buf, N);
+        let mut cpu = vec![f32::NAN; N];
+        isostasy_cpu(
+            &c,
+            &table,
+            &crust.crust_type,
+            &crust.thickness_km,
+            &crust.age_my,
+            &zeros,
+            &zeros,
+            &mut cpu,
+        );
+        let (mut worst, mut worst_law) = (0.0f64, 0.0f64);
+        for i in 0..N {
+            let age = crust.age_my[i];
+            // Tolerance: 2e-6 km (2 mm) for the table's f32 values (depths up to 7 km: ulp
+            // 4.8e-7 km) and three f32 operations of the interpolation, plus the f32 position
+            // in the table, x = age/step, off by up to an ulp of x, times the depth step of its
+            // interval (up to 80 m: the young floor of GDH1, and the jump of Parsons–Sclater's
+            // law at 70 My).
+            let samples = table.samples();
+            let x = if age.is_finite() {
+                (age as f64).clamp(0.0, 400.0) / samples.step_my
+            } else {
+                0.0
+            };
+            let k = (x as usize).min(samples.depth_km.len() - 2);
+            let step_km = (samples.depth_km[k + 1] - samples.depth_km[k]).abs();
+            let tol = 2e-6 + f32::EPSILON as f64 * x * step_km;
+            let d = (gpu[i] as f64 - cpu[i] as f64).abs();
+            worst = worst.max(d / tol);
+            assert!(
+                d <= tol,
+                "seed {seed}: {law:?} offset {offset}: age {age} My (sample {i}): gpu {} cpu {} \
+                 (tolerance {tol:e} km)",
+                gpu[i],
+                cpu[i]
+            );
+            // On the table's nodes (every 50th sample, and the planted ages) both are the
+            // published law itself (between nodes the table interpolates linearly, on both
+            // sides); an age on a node in f32 is off it by up to an ulp.
+            if i % 50 == 0 || !age.is_finite() || !(0.0..400.0).contains(&age) {
+                let node = x.round();
+                let expected = -ocean_depth_km(node * samples.step_my, law, offset);
+                let dl = (gpu[i] as f64 - expected).abs();
+                worst_law = worst_law.max(dl);
+                assert!(
+                    dl <= tol + (x - node).abs() * step_km,
+                    "seed {seed}: {law:?}: age {age} My: gpu {} law {expected}",
+                    gpu[i]
+                );
+            }
+        }
+        eprintln!(
+            "age-depth {law:?}: seed {seed}, worst {worst:.3} of the tolerance against the table, \
+             {worst_law:e} km against the law on its nodes"
+        );
+    }
+}
+
+/// A reference mesh's relief graph and a relief over it: land and sea from a few random waves
+/// (−4…+6 km, a third of the area sea), land below sea level in places (lakes).
+fn diffusion_case(rng: &mut SimRng) -> (SphereMesh, ReliefGraph, Vec<f32>, Vec<bool>) {
+    let mesh = SphereMesh::fibonacci(N, 0.3, rng.next_u64(), 6371.0).expect("mesh");
+    let g = ReliefGraph::new(
+        &mesh.positions,
+        &mesh.neighbor_start,
+        &mesh.neighbors,
+        Some(&mesh.triangles),
+        Some(&mesh.area_km2),
+        mesh.radius_km,
+    );
+    let waves: Vec<(glam::DVec3, f64, f64)> = (0..6)
+        .map(|_| {
+            let d = glam::DVec3::new(
+                rng.next_f64() - 0.5,
+                rng.next_f64() - 0.5,
+                rng.next_f64() - 0.5,
+            )
+            .normalize();
+            (
+                d,
+                2.0 + 10.0 * rng.next_f64(),
+                std::f64::consts::TAU * rng.next_f64(),
+            )
+        })
+        .collect();
+    let mut z = vec![0.0f32; N];
+    let mut ocean = vec![false; N];
+    for i in 0..N {
+        let p = mesh.positions[i];
+        let v: f64 = waves
+            .iter()
+            .map(|(d, k, ph)| (k * p.dot(*d) + ph).sin())
+            .sum::<f64>();
+        let h = 1.0 + 1.6 * v + 0.3 * (rng.next_f64() - 0.5);
+        ocean[i] = h < 0.0 && rng.next_f64() < 0.95;
+        z[i] = h.clamp(-4.0, 6.0) as f32;
+    }
+    (mesh, g, z, ocean)
+}
+
+#[test]
+fn diffusion_kernel_matches_cpu_reference_and_conserves_mass() {
+    let Some(mut ctx) = gpu_or_skip("diffusion") else {
+        return;
+    };
+    let seed = fresh_seed("GPU_TEST_SEED");
+    let mut rng = SimRng::new(seed, 13);
+    let (_mesh, g, z0, ocean) = diffusion_case(&mut rng);
+    let mut crust = Crust::with_len(N);
+    crust.elevation_km = vec![f32::NAN; N];
+    ctx.sync_crust(&crust, None).expect("upload");
+    let max_w = (0..N)
+        .map(|i| g.edges(i).map(|e| g.edge_weight[e] as f64).sum::<f64>() / g.area_km2[i])
+        .fold(0.0, f64::max);
+    let dt = 2.0;
+    let land = (0..N).filter(|&i| !ocean[i]).count();
+    let lakes = (0..N).filter(|&i| !ocean[i] && z0[i] < 0.0).count();
+    assert!(
+        land > N / 3 && land < N * 9 / 10,
+        "seed {seed}: {land} land samples"
+    );
+    assert!(
+        lakes > 100,
+        "seed {seed}: {lakes} land samples below sea level"
+    );
+    // Land samples of no finite elevation keep it (and stand at 0 for their neighbours): the
+    // same input with a few of them, for the parity; without, for the mass balance (a sample
+    // whose result is dropped breaks it on the CPU too).
+    let mut holes = z0.clone();
+    for k in 0..40 {
+        let i = 13 + 2_477 * k;
+        if !ocean[i] {
+            holes[i] = [f32::NAN, f32::INFINITY][k % 2];
+        }
+    }
+    // One, two and five sub-steps: both ends of the ping-pong, and the graph reused.
+    for substeps in [1u32, 2, 5] {
+        let kappa = 0.98 * substeps as f64 * 0.5 / (dt * max_w);
+        for (input, z_in) in [("with holes", &holes), ("whole", &z0)] {
+            let mut cpu_z = z_in.clone();
+            let mut cpu_d = vec![f32::NAN; N];
+            let mut cpu_o = vec![0.0f64; N];
+            let cpu = diffuse_land(
+                &g,
+                &mut cpu_z,
+                &ocean,
+                kappa,
+                dt,
+                &mut cpu_d,
+                &mut cpu_o,
+                &mut DiffusionScratch::default(),
+            );
+            assert_eq!(cpu.substeps, substeps);
+            let mut gpu_z = z_in.clone();
+            let mut gpu_d = vec![f32::NAN; N];
+            let mut gpu_o = vec![0.0f64; N];
+            let gpu = diffuse_land_gpu(
+                &mut ctx,
+                &g,
+                &mut gpu_z,
+                &ocean,
+                kappa,
+                dt,
+                &mut gpu_d,
+                &mut gpu_o,
+                &mut DiffusionScratch::default(),
+            )
+            .expect("dispatch")
+            .expect("something to diffuse");
+            assert_eq!(gpu.substeps, substeps);
+            let what = format!("seed {seed}, {substeps} sub-steps, input {input}");
+            // The device's elevation is the host's, bit for bit, everywhere (the system
+            // declares the write done on that basis): diffused land, untouched sea and
+            // non-finite land.
+            let buf = ctx.crust_buffers().unwrap().elevation_km.clone();
+            let resident = read_f32(&mut ctx, &buf, N);
+            for i in 0..N {
+                assert_eq!(
+                    resident[i].to_bits(),
+                    gpu_z[i].to_bits(),
+                    "{what}: sample {i}: device {} host {}",
+                    resident[i],
+                    gpu_z[i]
+                );
+                if ocean[i] || !z_in[i].is_finite() {
+                    assert_eq!(gpu_z[i].to_bits(), z_in[i].to_bits(), "{what}: sample {i}");
+                    assert_eq!(gpu_d[i], 0.0, "{what}: sample {i}");
+                } else {
+                    assert_eq!(gpu_d[i], gpu_z[i] - z_in[i], "{what}: sample {i}");
+                }
+            }
+            // It diffused: most land moved, and the coast received.
+            let moved = (0..N).filter(|&i| cpu_d[i].abs() > 1e-3).count();
+            assert!(moved > land / 2, "{what}: only {moved} samples moved");
+            let coast = (0..N).filter(|&i| cpu_o[i] > 0.0).count();
+            assert!(coast > 1000, "{what}: {coast} coast samples received");
+            // Per sample: four f32 ulps of the relief per sub-step (4·2⁻²³ km per km of the
+            // sample's height plus the ±6 km of its neighbours): each sub-step rounds a few
+            // terms up to the relief in f32 (the WGSL division allows 2.5 ulps); the CPU sums
+            // in f64 and rounds once.
+            let mut worst = 0.0f64;
+            for i in 0..N {
+                if !z_in[i].is_finite() {
+                    continue;
+                }
+                let tol = 4.0
+                    * f32::EPSILON as f64
+                    * substeps as f64
+                    * (1.0 + z_in[i].abs() as f64 + 6.0);
+                let d = (gpu_z[i] as f64 - cpu_z[i] as f64).abs();
+                worst = worst.max(d / tol);
+                assert!(
+                    d <= tol,
+                    "{what}: sample {i} (ocean {}, from {}): gpu {} cpu {}",
+                    ocean[i],
+                    z_in[i],
+                    gpu_z[i],
+                    cpu_z[i]
+                );
+                // Receipts: relative 1e-5 per sub-step (f32 sums of a few terms, accumulated
+                // over the sub-steps).
+                let r = (gpu_o[i] - cpu_o[i]).abs();
+                assert!(
+                    r <= 1e-5 * substeps as f64 * cpu_o[i].abs() + 1e-3,
+                    "{what}: receipt of sample {i}: gpu {} cpu {}",
+                    gpu_o[i],
+                    cpu_o[i]
+                );
+            }
+            assert!(
+                (gpu.to_ocean_km3 - cpu.to_ocean_km3).abs()
+                    <= 1e-5 * substeps as f64 * cpu.to_ocean_km3,
+                "{what}: to the sea gpu {} cpu {}",
+                gpu.to_ocean_km3,
+                cpu.to_ocean_km3
+            );
+            if input != "whole" {
+                eprintln!("diffusion: {what}: worst {worst:.3} of the tolerance");
+                continue;
+            }
+            // Mass: what the land lost equals what it gained plus what crossed the coast, on
+            // the device as on the CPU, within the f32 rounding of the stored elevations: each
+            // land sample's elevation is rounded once per sub-step and once more for its
+            // change, by at most half an ulp (≤ 2⁻²⁴·|h|) times its area. Those roundings are
+            // independent from sample to sample, so the sum is bounded by ten standard
+            // deviations of their sum (a worst case, every rounding one way, would be about a
+            // thousand times as large and let a broken coast pass).
+            let balance = |d: &[f32], o: &[f64]| -> f64 {
+                let land: f64 = (0..N)
+                    .filter(|&i| !ocean[i])
+                    .map(|i| d[i] as f64 * g.area_km2[i])
+                    .sum();
+                land + o.iter().sum::<f64>()
+            };
+            let variance: f64 = (0..N)
+                .filter(|&i| !ocean[i])
+                .map(|i| {
+                    let half_ulp = 0.5
+                        * f32::EPSILON as f64
+                        * (z_in[i].abs().max(gpu_z[i].abs()) as f64)
+                        * g.area_km2[i];
+                    // Uniform in ±half an ulp: variance (2·half)²/12.
+                    (substeps + 1) as f64 * half_ulp * half_ulp / 3.0
+                })
+                .sum();
+            let rounding = 10.0 * variance.sqrt();
+            let (gb, cb) = (balance(&gpu_d, &gpu_o), balance(&cpu_d, &cpu_o));
+            let moved_km3 = gpu.lowered_km3 + gpu.raised_km3;
+            eprintln!(
+                "diffusion: {what}, {coast} coast samples: worst {worst:.3} of the tolerance; \
+                 moved {moved_km3:.3e} km³, to the sea {:.3e} km³; imbalance gpu {gb:.3e} km³, \
+                 cpu {cb:.3e} km³, bound {rounding:.3e} km³",
+                gpu.to_ocean_km3
+            );
+            assert!(
+                gb.abs() <= rounding,
+                "{what}: the device lost {gb} km³ (bound {rounding})"
+            );
+            assert!(
+                gpu.to_ocean_km3 > 1e-3 * moved_km3,
+                "{what}: nothing crossed the coast"
+            );
+        }
     }
 }
 
@@ -1126,6 +1629,75 @@ fn a_steady_gpu_step_reads_back_a_few_bytes_per_sample() {
         // The pulls do not move the crust's change tick, so nothing goes up in full again.
         assert_eq!(uploads, 0, "{measured:?}");
     }
+}
+
+#[test]
+fn relief_on_the_gpu_backend_runs_isostasy_and_diffusion_on_the_device() {
+    if gpu_or_skip("relief on the device").is_none() {
+        return;
+    }
+    let n = 20_000usize;
+    let mut sim = gpu_sim(n as u64, 9, false);
+    sim.step().expect("first step");
+    let mut measured = Vec::new();
+    for _ in 0..12 {
+        let before = sim.world().resource::<GpuContext>().traffic;
+        let fronts = sim.world().resource::<FrontPoints>().len();
+        let (resamplings, since) = (sim.clock().resamplings, sim.clock().steps_since_resample);
+        sim.step().expect("step");
+        let gpu = sim.world().resource::<GpuContext>();
+        let after = gpu.traffic;
+        // Every step ran the isostatic combine and the land diffusion on the device.
+        assert_eq!(
+            after.isostasy_passes,
+            before.isostasy_passes + 1,
+            "{after:?}"
+        );
+        assert_eq!(
+            after.diffusion_passes,
+            before.diffusion_passes + 1,
+            "{after:?}"
+        );
+        if sim.clock().resamplings != resamplings || since == 0 {
+            continue;
+        }
+        // Steady step: the isostatic elevation stays on the device (nothing read back).
+        assert!(
+            gpu.device_newer().contains(FieldMask::ELEVATION),
+            "{:?}",
+            gpu.device_newer()
+        );
+        assert_eq!(after.crust_uploads, before.crust_uploads, "{after:?}");
+        // What crosses the bus (docs/gpu.md, "Relief on the GPU"), with the coast of this
+        // step's sea.
+        let coast = {
+            let ocean = &sim.world().resource::<DrainageNetwork>().drainage.ocean;
+            let mesh = sim.mesh();
+            (0..n)
+                .filter(|&j| ocean[j] && mesh.neighbors_of(j).iter().any(|&i| !ocean[i as usize]))
+                .count()
+        };
+        let (n4, fronts, coast) = (4 * n as u64, fronts as u64, coast as u64);
+        let up = after.uploaded_bytes - before.uploaded_bytes;
+        let down = after.downloaded_bytes - before.downloaded_bytes;
+        // Up: the elevation to diffuse, the ocean bits and the coast list; the thickness after
+        // the rivers and after the sediment (declared writes); the smoothed root and the trench
+        // depth; the front table (32 B a point) and gather indices (12 B a point); uniforms.
+        let up_bound = 5 * n4 + (n as u64).div_ceil(32) * 4 + 4 * coast + 44 * fronts + 4096;
+        // Down: the elevation the isostasy left on the device (pulled by the drainage), the
+        // thickness the uplift kernel thickened (pulled by the rivers), the age (pulled by the
+        // sediment), the diffused elevation and the coast's receipts; the reduction (24 B and
+        // the land bitmask) and the gathered front elevations (12 B a point).
+        let down_bound = 4 * n4 + 4 * coast + 24 + 4 * (n as u64).div_ceil(32) + 12 * fronts;
+        assert!(
+            up <= up_bound,
+            "{up} B up, bound {up_bound} ({coast} coast samples)"
+        );
+        assert!(down <= down_bound, "{down} B down, bound {down_bound}");
+        measured.push((up as f64 / n as f64, down as f64 / n as f64, coast));
+    }
+    eprintln!("steady relief steps (up B/sample, down B/sample, coast samples): {measured:?}");
+    assert!(measured.len() >= 5, "{measured:?}");
 }
 
 fn write_one_elevation(mut crust: ResMut<Crust>) {

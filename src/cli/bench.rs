@@ -205,6 +205,10 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
             "{:<28} {:>10} on the GPU",
             "interpolations", t.interpolations
         );
+        println!(
+            "{:<28} {:>10} isostasy, {} diffusion passes on the GPU",
+            "relief", t.isostasy_passes, t.diffusion_passes
+        );
     }
     println!(
         "{:<28} {:>10.1} ms  ({} rifts of the largest plate into 2)",

@@ -32,6 +32,10 @@ pub struct GpuTraffic {
     pub collision_surges: u64,
     /// Resamplings whose interpolation ran on the device.
     pub interpolations: u64,
+    /// Isostasy passes (the elevation from the crust) run on the device.
+    pub isostasy_passes: u64,
+    /// Land diffusion passes (one per call, whatever its sub-steps) run on the device.
+    pub diffusion_passes: u64,
 }
 
 /// A kernel's pipeline and whatever it keeps on the device between dispatches (uniform buffers,

@@ -20,6 +20,11 @@
 use rayon::prelude::*;
 
 use super::graph::ReliefGraph;
+use crate::gpu::GpuContext;
+use crate::gpu::GpuError;
+use crate::gpu::diffusion::{
+    DiffusionGraph, DiffusionSteps, diffusion_dispatch, diffusion_read_back,
+};
 
 /// Volumes moved by one call of [`diffuse_land`], km³.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -43,22 +48,30 @@ pub struct DiffusionScratch {
     coast: Vec<u32>,
     receipts: Vec<f64>,
     max_weight_rate: Option<(usize, f64)>,
+    /// The device's diffused elevation and coastal receipts ([`diffuse_land_gpu`]).
+    device_h: Vec<f32>,
+    device_receipts: Vec<f32>,
 }
 
-/// Diffuses land elevations over `dt_my` with diffusivity `kappa_km2_per_my`. Land samples are
-/// those not in `ocean`; ocean samples are held at sea level and receive the coastal outflow,
-/// accumulated (+=) into `to_ocean_km3` (km³ per ocean sample). Writes the change of every
-/// sample (km; 0 in the ocean) to `delta_km` and applies it to `elevation_km`.
-pub fn diffuse_land(
+/// The name of [`diffuse_land`] as the CPU reference of the `diffusion` kernel
+/// (`shaders/diffusion.wgsl`).
+pub use self::diffuse_land as diffusion_cpu;
+
+/// The set-up of one call of [`diffuse_land`] (and [`diffuse_land_gpu`]): zeroes `delta_km`,
+/// checks the inputs, and finds the explicit sub-steps (count and length, My), the land samples
+/// and the coast (ocean samples beside land, ascending) into `scratch`. None when there is
+/// nothing to diffuse.
+#[allow(clippy::too_many_arguments)]
+fn prepare(
     g: &ReliefGraph,
-    elevation_km: &mut [f32],
+    elevation_km: &[f32],
     ocean: &[bool],
     kappa_km2_per_my: f64,
     dt_my: f64,
     delta_km: &mut [f32],
-    to_ocean_km3: &mut [f64],
+    to_ocean_km3: &[f64],
     scratch: &mut DiffusionScratch,
-) -> DiffusionBudget {
+) -> Option<(u32, f64)> {
     let n = g.len();
     delta_km.iter_mut().for_each(|d| *d = 0.0);
     if !(kappa_km2_per_my > 0.0 && dt_my > 0.0)
@@ -67,7 +80,7 @@ pub fn diffuse_land(
         || delta_km.len() < n
         || to_ocean_km3.len() < n
     {
-        return DiffusionBudget::default();
+        return None;
     }
     let kappa = kappa_km2_per_my;
     // Stability bound: max over all samples of Σw/a (1/km²), cached per graph size.
@@ -86,7 +99,7 @@ pub fn diffuse_land(
     };
     let max_rate = kappa * max_w;
     if max_rate <= 0.0 {
-        return DiffusionBudget::default();
+        return None;
     }
     let substeps = ((dt_my * max_rate / 0.5).ceil() as u32).clamp(1, 10_000);
     let dts = dt_my / substeps as f64;
@@ -104,6 +117,68 @@ pub fn diffuse_land(
     }
     scratch.coast.sort_unstable();
     scratch.coast.dedup();
+    Some((substeps, dts))
+}
+
+/// The end of one call: writes the new elevation `new_of(i)` of every land sample of `scratch`
+/// whose elevation was finite, its change to `delta_km`, and the volumes lowered and raised to
+/// `budget`.
+fn apply_land_change(
+    g: &ReliefGraph,
+    elevation_km: &mut [f32],
+    delta_km: &mut [f32],
+    land: &[u32],
+    new_of: impl Fn(usize) -> f32,
+    budget: &mut DiffusionBudget,
+) {
+    for &i in land {
+        let i = i as usize;
+        let old = elevation_km[i];
+        if !old.is_finite() {
+            continue;
+        }
+        let new = new_of(i);
+        elevation_km[i] = new;
+        let d = new - old;
+        delta_km[i] = d;
+        let v = d as f64 * g.area_km2[i];
+        if v < 0.0 {
+            budget.lowered_km3 -= v;
+        } else {
+            budget.raised_km3 += v;
+        }
+    }
+}
+
+/// Diffuses land elevations over `dt_my` with diffusivity `kappa_km2_per_my`. Land samples are
+/// those not in `ocean`; ocean samples are held at sea level and receive the coastal outflow,
+/// accumulated (+=) into `to_ocean_km3` (km³ per ocean sample). Writes the change of every
+/// sample (km; 0 in the ocean) to `delta_km` and applies it to `elevation_km`.
+#[allow(clippy::too_many_arguments)]
+pub fn diffuse_land(
+    g: &ReliefGraph,
+    elevation_km: &mut [f32],
+    ocean: &[bool],
+    kappa_km2_per_my: f64,
+    dt_my: f64,
+    delta_km: &mut [f32],
+    to_ocean_km3: &mut [f64],
+    scratch: &mut DiffusionScratch,
+) -> DiffusionBudget {
+    let n = g.len();
+    let Some((substeps, dts)) = prepare(
+        g,
+        elevation_km,
+        ocean,
+        kappa_km2_per_my,
+        dt_my,
+        delta_km,
+        to_ocean_km3,
+        scratch,
+    ) else {
+        return DiffusionBudget::default();
+    };
+    let kappa = kappa_km2_per_my;
     scratch.h.resize(n, 0.0);
     scratch.next.resize(n, 0.0);
     for &i in &scratch.land {
@@ -171,22 +246,93 @@ pub fn diffuse_land(
         to_ocean_km3[j as usize] += scratch.receipts[k];
         budget.to_ocean_km3 += scratch.receipts[k];
     }
-    for &i in &scratch.land {
-        let i = i as usize;
-        let old = elevation_km[i];
-        if !old.is_finite() {
-            continue;
-        }
-        let new = scratch.h[i] as f32;
-        elevation_km[i] = new;
-        let d = new - old;
-        delta_km[i] = d;
-        let v = d as f64 * g.area_km2[i];
-        if v < 0.0 {
-            budget.lowered_km3 -= v;
-        } else {
-            budget.raised_km3 += v;
-        }
-    }
+    let h = &scratch.h;
+    apply_land_change(
+        g,
+        elevation_km,
+        delta_km,
+        &scratch.land,
+        |i| h[i] as f32,
+        &mut budget,
+    );
     budget
+}
+
+/// [`diffuse_land`] with the sub-steps on the device (`shaders/diffusion.wgsl`, f32): the same
+/// set-up (sub-steps, land, coast) and the same end on the host, from the elevation and the
+/// coastal receipts the device computed. `elevation_km` goes up into the resident elevation
+/// buffer and is diffused there, so after `Ok(Some(_))` the device's elevation equals the
+/// host's (declare the write of the elevation as done). `Ok(None)`: nothing to diffuse, the
+/// device and `elevation_km` untouched (call [`diffuse_land`], which returns at once). On an
+/// error the host's `elevation_km` and `to_ocean_km3` are as they were (the resident elevation
+/// may not be), so [`diffuse_land`] can run instead.
+#[allow(clippy::too_many_arguments)]
+pub fn diffuse_land_gpu(
+    ctx: &mut GpuContext,
+    g: &ReliefGraph,
+    elevation_km: &mut [f32],
+    ocean: &[bool],
+    kappa_km2_per_my: f64,
+    dt_my: f64,
+    delta_km: &mut [f32],
+    to_ocean_km3: &mut [f64],
+    scratch: &mut DiffusionScratch,
+) -> Result<Option<DiffusionBudget>, GpuError> {
+    let n = g.len();
+    let Some((substeps, dts)) = prepare(
+        g,
+        elevation_km,
+        ocean,
+        kappa_km2_per_my,
+        dt_my,
+        delta_km,
+        to_ocean_km3,
+        scratch,
+    ) else {
+        return Ok(None);
+    };
+    let Some(z) = ctx
+        .crust_buffers()
+        .filter(|b| b.len == n)
+        .map(|b| b.elevation_km.clone())
+    else {
+        return Err(GpuError::Kernel {
+            kernel: "diffusion",
+            message: format!("no crust of {n} samples on the device"),
+        });
+    };
+    ctx.upload(&z, bytemuck::cast_slice(&elevation_km[..n]));
+    let graph = DiffusionGraph {
+        neighbor_start: &g.neighbor_start,
+        neighbors: &g.neighbors,
+        edge_weight: &g.edge_weight,
+        area_km2: &g.area_km2,
+    };
+    let steps = DiffusionSteps {
+        rate_km2: kappa_km2_per_my * dts,
+        substeps,
+    };
+    diffusion_dispatch(ctx, &graph, &ocean[..n], &scratch.coast, &steps)?;
+    scratch.device_h.resize(n, 0.0);
+    scratch.device_receipts.resize(scratch.coast.len(), 0.0);
+    diffusion_read_back(ctx, &mut scratch.device_h, &mut scratch.device_receipts)?;
+    let mut budget = DiffusionBudget {
+        substeps,
+        ..Default::default()
+    };
+    for (k, &j) in scratch.coast.iter().enumerate() {
+        let r = scratch.device_receipts[k] as f64;
+        to_ocean_km3[j as usize] += r;
+        budget.to_ocean_km3 += r;
+    }
+    let h = &scratch.device_h;
+    apply_land_change(
+        g,
+        elevation_km,
+        delta_km,
+        &scratch.land,
+        |i| h[i],
+        &mut budget,
+    );
+    Ok(Some(budget))
 }

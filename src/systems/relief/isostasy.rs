@@ -36,6 +36,8 @@
 use rayon::prelude::*;
 
 use super::graph::ReliefGraph;
+use crate::gpu::isostasy::{AgeDepthSamples, IsostasyConstants};
+use crate::resources::CrustType;
 
 /// Densities (g/cm³), reference column and elastic plate.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -113,6 +115,21 @@ impl IsostasyParams {
     /// Width σ (km) of the Gaussian standing in for the flexural response, 0.83·α.
     pub fn regional_sigma_km(&self) -> f64 {
         0.832 * self.flexural_parameter_km()
+    }
+
+    /// The constants of the per-sample combine ([`isostasy_cpu`] and the GPU kernel), with
+    /// oceanic crust `oceanic_thickness_km` thick (what lies above it is load).
+    pub fn constants(&self, oceanic_thickness_km: f64) -> IsostasyConstants {
+        IsostasyConstants {
+            ref_thickness_km: self.ref_thickness_km,
+            ref_elevation_km: self.ref_elevation_km,
+            root_ratio: self.rho_crust / self.rho_mantle,
+            rho_mantle: self.rho_mantle,
+            rho_water: self.rho_water,
+            max_support_km: self.max_support_km,
+            oceanic_thickness_km,
+            sediment_gain: self.sediment_gain(),
+        }
     }
 }
 
@@ -208,8 +225,10 @@ pub struct AgeDepthTable {
 }
 
 impl AgeDepthTable {
-    const STEP: f64 = 0.05;
-    const MAX_AGE: f64 = 400.0;
+    /// Age step of the table, My.
+    pub const STEP: f64 = 0.05;
+    /// Ages are clamped to this, My.
+    pub const MAX_AGE: f64 = 400.0;
 
     /// Table of [`ocean_depth_km`] for `law` and `ridge_offset_km`.
     pub fn new(law: AgeDepthLaw, ridge_offset_km: f64) -> Self {
@@ -233,6 +252,15 @@ impl AgeDepthTable {
         let k = (x as usize).min(self.depth.len() - 2);
         let f = x - k as f64;
         self.depth[k] * (1.0 - f) + self.depth[k + 1] * f
+    }
+
+    /// The tabulated depths, their step and the clamp age (what the GPU kernel interpolates).
+    pub fn samples(&self) -> AgeDepthSamples<'_> {
+        AgeDepthSamples {
+            depth_km: &self.depth,
+            step_my: Self::STEP,
+            max_age_my: Self::MAX_AGE,
+        }
     }
 }
 
@@ -388,6 +416,41 @@ impl RegionalIsostasy {
         if thickness_km.len() < n || continental.len() < n || elevation_km.len() < n {
             return 0;
         }
+        let passes = self.smooth_root(g, thickness_km, continental, p);
+        let c = p.constants(0.0);
+        let root = &self.root;
+        elevation_km
+            .par_iter_mut()
+            .enumerate()
+            .with_min_len(8192)
+            .for_each(|(i, z)| {
+                if !continental[i] {
+                    return;
+                }
+                let t = thickness_km[i] as f64;
+                if t.is_finite() {
+                    *z = continental_surface_km(t, root[i], &c);
+                }
+            });
+        passes
+    }
+
+    /// The smoothing of [`RegionalIsostasy::continental_elevation`] without the combine: the
+    /// root r = (T − T₀)·ρ_c/ρ_m of every continental sample of `thickness_km` (0 elsewhere)
+    /// smoothed by the regional kernel of `p` into the deflection w = G∗r, left in
+    /// [`RegionalIsostasy::deflection_km`]. Returns the number of smoothing passes used (0 when
+    /// an input is shorter than the graph, leaving the deflection as it was).
+    pub fn smooth_root(
+        &mut self,
+        g: &ReliefGraph,
+        thickness_km: &[f32],
+        continental: &[bool],
+        p: &IsostasyParams,
+    ) -> u32 {
+        let n = g.len();
+        if thickness_km.len() < n || continental.len() < n {
+            return 0;
+        }
         let t0 = p.ref_thickness_km;
         let c = p.rho_crust / p.rho_mantle;
         self.root.resize(n, 0.0);
@@ -446,26 +509,71 @@ impl RegionalIsostasy {
                 std::mem::swap(&mut self.root, &mut self.next);
             }
         }
-        let root = &self.root;
-        elevation_km
-            .par_iter_mut()
-            .enumerate()
-            .with_min_len(8192)
-            .for_each(|(i, z)| {
-                if !continental[i] {
-                    return;
-                }
-                let t = thickness_km[i] as f64;
-                if !t.is_finite() {
-                    return;
-                }
-                let own = (t - t0) * c;
-                let w = (root[i] as f64).clamp(own - p.max_support_km, own + p.max_support_km);
-                let dry = p.ref_elevation_km + (t - t0) - w;
-                *z = submerge(dry, p) as f32;
-            });
         passes
     }
+}
+
+/// Surface elevation (km) of a continental column `t_km` thick (finite) whose smoothed root is
+/// `root_km`: the root is held within `c.max_support_km` of the column's own, the column floats
+/// on it, and below sea level the water load deepens it.
+#[inline]
+fn continental_surface_km(t_km: f64, root_km: f32, c: &IsostasyConstants) -> f32 {
+    let t0 = c.ref_thickness_km;
+    let own = (t_km - t0) * c.root_ratio;
+    let w = (root_km as f64).clamp(own - c.max_support_km, own + c.max_support_km);
+    let dry = c.ref_elevation_km + (t_km - t0) - w;
+    let z = if dry >= 0.0 {
+        dry
+    } else {
+        dry * c.rho_mantle / (c.rho_mantle - c.rho_water)
+    };
+    z as f32
+}
+
+/// The CPU kernel (reference of `shaders/isostasy.wgsl`): the elevation of every sample from
+/// the crust, given the smoothed root (`deflection_km`, w = G∗r from
+/// [`RegionalIsostasy::smooth_root`]) and the trench depth of every sample (km below the floor
+/// beside it).
+///
+/// - Continental samples of finite thickness T: h₀ + (T − T₀) − w', w' = w held within
+///   `c.max_support_km` of the sample's own root (T − T₀)·ρ_c/ρ_m, with the water load below
+///   sea level; a non-finite thickness leaves the elevation as it is.
+/// - Oceanic samples: −depth(age) (from `table`) + gain·(T − T_oc) − clamp(w, ±S) − trench.
+///
+/// Computed in f64 from the f32 inputs and rounded once. Inputs shorter than `elevation_km`
+/// read as w = 0 and no trench.
+#[allow(clippy::too_many_arguments)]
+pub fn isostasy_cpu(
+    c: &IsostasyConstants,
+    table: &AgeDepthTable,
+    crust_type: &[CrustType],
+    thickness_km: &[f32],
+    age_my: &[f32],
+    deflection_km: &[f32],
+    trench_km: &[f32],
+    elevation_km: &mut [f32],
+) {
+    let support = c.max_support_km;
+    elevation_km
+        .par_iter_mut()
+        .enumerate()
+        .with_min_len(8192)
+        .for_each(|(i, z)| {
+            let w = deflection_km.get(i).copied().unwrap_or(0.0);
+            if crust_type[i] == CrustType::Oceanic {
+                let excess = thickness_km[i] as f64 - c.oceanic_thickness_km;
+                let wi = (w as f64).clamp(-support, support);
+                let trench = trench_km.get(i).copied().unwrap_or(0.0);
+                *z = (-table.depth_km(age_my[i] as f64) + c.sediment_gain * excess
+                    - wi
+                    - trench as f64) as f32;
+            } else {
+                let t = thickness_km[i] as f64;
+                if t.is_finite() {
+                    *z = continental_surface_km(t, w, c);
+                }
+            }
+        });
 }
 
 impl CoarseLevel {

@@ -49,14 +49,15 @@ pub mod stream_power;
 use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 
-use self::diffusion::{DiffusionBudget, DiffusionScratch, diffuse_land};
+use self::diffusion::{DiffusionBudget, DiffusionScratch, diffuse_land, diffuse_land_gpu};
 use self::drainage::{Drainage, sea_mask};
 use self::graph::ReliefGraph;
-use self::isostasy::{AgeDepthLaw, AgeDepthTable, IsostasyParams, RegionalIsostasy};
+use self::isostasy::{AgeDepthLaw, AgeDepthTable, IsostasyParams, RegionalIsostasy, isostasy_cpu};
 use self::sediment::{SedimentBudget, SedimentParams, SedimentRouter};
 use self::stream_power::{StreamPowerParams, StreamPowerScratch, stream_power_erode};
 use crate::geometry::SphereMesh;
-use crate::gpu::{FieldMask, GpuContext, pull_or_record};
+use crate::gpu::isostasy::isostasy_dispatch;
+use crate::gpu::{FieldMask, GpuContext, pull_or_record, run_or_record};
 use crate::resources::convergence::NONE;
 use crate::resources::params::Params;
 use crate::resources::{ConvergenceField, Crust, CrustType, FrontPoints};
@@ -334,9 +335,22 @@ pub fn erode_rivers(
         return;
     }
     const WRITES: FieldMask = FieldMask(FieldMask::ELEVATION.0 | FieldMask::THICKNESS.0);
-    let Some(declared) = before_write(&mut crust, &mut gpu, FieldMask::NONE, WRITES) else {
+    let Some(mut declared) = before_write(&mut crust, &mut gpu, FieldMask::NONE, WRITES) else {
         return;
     };
+    // On the GPU backend the diffusion runs on the device, on the resident elevation: the
+    // device must hold the rest of the crust as the host does (it does unless a CPU system
+    // wrote the crust undeclared earlier in the step; then every stale field came down above,
+    // and the whole crust goes up now rather than at the next kernel).
+    if let Some(g) = gpu.as_mut()
+        && !declared
+        && g.failure.is_none()
+    {
+        let tick = crust.last_changed();
+        if run_or_record(g, |g| g.sync_crust(&crust, Some(tick))) {
+            declared = g.can_declare_host_write(WRITES, crust.len(), tick);
+        }
+    }
     let dt = params.time.time_step_my;
     let spl = stream_power_params(&params);
     let kappa = params.rivers.hillslope_diffusivity_km2_per_my;
@@ -390,16 +404,52 @@ pub fn erode_rivers(
             .sum();
         flux.incised_km3 += extra;
     }
-    flux.diffusion = diffuse_land(
-        g,
-        &mut crust.elevation_km,
-        &network.drainage.ocean,
-        kappa,
-        dt,
-        &mut flux.diffusion_km,
-        &mut flux.to_ocean_km3,
-        &mut state.diffusion,
-    );
+    // Hillslope diffusion: on the device when the write is declared (the device then holds the
+    // diffused elevation, and only the thickness goes up at the end), else on the CPU.
+    let mut on_device = None;
+    if declared
+        && let Some(ctx) = gpu.as_mut()
+        && ctx.failure.is_none()
+    {
+        match diffuse_land_gpu(
+            ctx,
+            g,
+            &mut crust.elevation_km,
+            &network.drainage.ocean,
+            kappa,
+            dt,
+            &mut flux.diffusion_km,
+            &mut flux.to_ocean_km3,
+            &mut state.diffusion,
+        ) {
+            Ok(budget) => on_device = budget,
+            Err(e) => {
+                // The resident elevation is lost: the step stops with the error, and the next
+                // kernel would upload the whole crust.
+                ctx.invalidate_crust();
+                ctx.record_failure(e);
+                declared = false;
+            }
+        }
+    }
+    let uploaded = if on_device.is_some() {
+        FieldMask::THICKNESS
+    } else {
+        WRITES
+    };
+    flux.diffusion = match on_device {
+        Some(budget) => budget,
+        None => diffuse_land(
+            g,
+            &mut crust.elevation_km,
+            &network.drainage.ocean,
+            kappa,
+            dt,
+            &mut flux.diffusion_km,
+            &mut flux.to_ocean_km3,
+            &mut state.diffusion,
+        ),
+    };
     crust
         .thickness_km
         .par_iter_mut()
@@ -408,7 +458,7 @@ pub fn erode_rivers(
         .for_each(|(t, (&e, &d))| *t += d - e);
     flux.total_eroded_km3 += flux.eroded_km3();
     flux.total_deposited_km3 += flux.diffusion.raised_km3;
-    after_write(&crust_res, &mut gpu, WRITES, declared);
+    after_write(&crust_res, &mut gpu, uploaded, declared);
 }
 
 /// Lays down what the rivers and slopes carried (phenomenon `sediment`): in lakes, on the shelf,
@@ -519,6 +569,11 @@ pub fn trench_depth_on_mesh_km(d_km: f64, depth_km: f64, width_km: f64, spacing_
 /// The elevation of every sample from the crust (phenomenon `isostasy`): continents by regional
 /// Airy isostasy from their thickness, ocean floor by its age, its load and the flexure of
 /// neighbouring continents, and a trench in front of each active subduction front.
+///
+/// The smoothed root (the regional response) and the trench depths are computed on the host; the
+/// per-sample combine ([`isostasy_cpu`]) runs on the device on the GPU backend
+/// (`shaders/isostasy.wgsl`), which then leaves the elevation there, marked newer, and reads
+/// nothing back.
 #[allow(clippy::too_many_arguments)]
 pub fn apply_isostasy(
     params: Res<Params>,
@@ -529,14 +584,24 @@ pub fn apply_isostasy(
     field: Res<ConvergenceField>,
     mut gpu: Option<ResMut<GpuContext>>,
 ) {
-    let reads = FieldMask(FieldMask::THICKNESS.0 | FieldMask::AGE.0);
-    let Some(declared) = before_write(&mut crust, &mut gpu, reads, FieldMask::ELEVATION) else {
-        return;
+    // On the GPU backend the host reads only the thickness (for the smoothed root) and crust
+    // type (never written on the device); age stays on the device, and the host copy is not
+    // written.
+    let on_device = gpu.as_ref().is_some_and(|g| g.failure.is_none());
+    let declared = if on_device {
+        if !pull(&mut crust, &mut gpu, FieldMask::THICKNESS) {
+            return;
+        }
+        false
+    } else {
+        let reads = FieldMask(FieldMask::THICKNESS.0 | FieldMask::AGE.0);
+        match before_write(&mut crust, &mut gpu, reads, FieldMask::ELEVATION) {
+            Some(declared) => declared,
+            None => return,
+        }
     };
     let n = mesh.len();
     let state = &mut *state;
-    let mut crust_res = crust;
-    let crust = &mut *crust_res;
     let iso = isostasy_params(&params);
     let ip = &params.isostasy;
     if ensure_graph(&mut state.graph, &mesh) {
@@ -564,19 +629,18 @@ pub fn apply_isostasy(
             AgeDepthTable::new(law, offset),
         ));
     }
+    let host: &Crust = &crust;
     state.oceanic.clear();
     state
         .oceanic
-        .extend(crust.crust_type.iter().map(|&t| t == CrustType::Oceanic));
+        .extend(host.crust_type.iter().map(|&t| t == CrustType::Oceanic));
     state.continental.clear();
     state.continental.extend(state.oceanic.iter().map(|&o| !o));
-    state.iso.continental_elevation(
-        g,
-        &crust.thickness_km,
-        &state.continental,
-        &iso,
-        &mut crust.elevation_km,
-    );
+    if host.thickness_km.len() >= n && host.elevation_km.len() >= n {
+        state
+            .iso
+            .smooth_root(g, &host.thickness_km, &state.continental, &iso);
+    }
     // Trench depth per sample, from the current fronts.
     state.trench_km.clear();
     state.trench_km.resize(n, 0.0);
@@ -588,7 +652,7 @@ pub fn apply_isostasy(
             .par_iter_mut()
             .zip(field.subducting_point.par_iter())
             .zip(field.subducting_distance_km.par_iter())
-            .zip(crust.crust_type.par_iter())
+            .zip(host.crust_type.par_iter())
             .with_min_len(8192)
             .for_each(|(((t, &sp), &sd), &ct)| {
                 if sp != NONE && ct == CrustType::Oceanic && fp.active[sp as usize] {
@@ -600,24 +664,37 @@ pub fn apply_isostasy(
     let Some((_, _, table)) = state.table.as_ref() else {
         return;
     };
+    let c = iso.constants(params.init.oceanic_thickness_km);
     let w = state.iso.deflection_km();
-    let support = ip.max_flexural_support_km;
-    let t_oc = params.init.oceanic_thickness_km;
-    let gain = iso.sediment_gain();
-    let trench = &state.trench_km;
-    crust
-        .elevation_km
-        .par_iter_mut()
-        .enumerate()
-        .with_min_len(8192)
-        .for_each(|(i, z)| {
-            if state.oceanic[i] {
-                let excess = crust.thickness_km[i] as f64 - t_oc;
-                let wi = (w.get(i).copied().unwrap_or(0.0) as f64).clamp(-support, support);
-                *z = (-table.depth_km(crust.age_my[i] as f64) + gain * excess
-                    - wi
-                    - trench[i] as f64) as f32;
+    if on_device && let Some(ctx) = gpu.as_mut() {
+        let tick = crust.last_changed();
+        let done = run_or_record(ctx, |ctx| {
+            let host = crust.bypass_change_detection();
+            if !ctx.can_declare_host_write(FieldMask::NONE, host.len(), tick) {
+                // A CPU system wrote the crust undeclared: the device takes the whole crust.
+                ctx.pull(host, FieldMask::ALL)?;
             }
+            ctx.sync_crust(host, Some(tick))?;
+            isostasy_dispatch(ctx, &c, &table.samples(), w, &state.trench_km)?;
+            // The host copy is pulled lazily, by the next CPU reader (the drainage).
+            ctx.note_device_write(crate::gpu::isostasy::WRITES, host)
         });
-    after_write(&crust_res, &mut gpu, FieldMask::ELEVATION, declared);
+        if done {
+            return;
+        }
+        // The device failed (the step stops with the error): the host's combine instead, on
+        // the age as of its last pull.
+    }
+    let host = &mut *crust;
+    isostasy_cpu(
+        &c,
+        table,
+        &host.crust_type,
+        &host.thickness_km,
+        &host.age_my,
+        w,
+        &state.trench_km,
+        &mut host.elevation_km,
+    );
+    after_write(&crust, &mut gpu, FieldMask::ELEVATION, declared);
 }

@@ -24,6 +24,10 @@ struct IsostasyUniforms {
     table_last: u32,
     count: u32,
     row_stride: u32,
+    max_oceanic_load_km: f32,
+    max_continental_km: f32,
+    _pad0: u32,
+    _pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> u: IsostasyUniforms;
@@ -66,14 +70,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let s = u.max_support_km;
     if (byte_of(crust_type[i >> 2u], i) == CRUST_OCEANIC) {
         let wi = clamp(w, -s, s);
-        elevation_km[i] = -ocean_depth(age_bits[i]) + u.sediment_gain * (t - u.oceanic_thickness_km)
+        let load = t - u.oceanic_thickness_km;
+        let held = select(load, u.max_oceanic_load_km, load > u.max_oceanic_load_km);
+        elevation_km[i] = -ocean_depth(age_bits[i]) + u.sediment_gain * held
             - wi - trench_km[i];
         return;
     }
     if (!is_finite_bits(tb)) {
         return;
     }
-    let excess = t - u.ref_thickness_km;
+    let tc = select(t, u.max_continental_km, t > u.max_continental_km);
+    let excess = tc - u.ref_thickness_km;
     let own = excess * u.root_ratio;
     let wc = clamp(w, own - s, own + s);
     let dry = u.ref_elevation_km + excess - wc;

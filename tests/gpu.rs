@@ -192,15 +192,18 @@ fn aging_kernel_matches_cpu_reference_bit_for_bit() {
     }
 }
 
-/// Random isostasy inputs over `crust`: thickness (continental 10–80 km, oceanic T_oc plus up to
-/// 4 km of load), the smoothed root w (−5…+15 km, beyond the support on both sides), trench
+/// Random isostasy inputs over `crust`: thickness (continental 10–80 km against a cap of 70,
+/// oceanic T_oc plus up to 4 km of load against a cap of 3), the smoothed root w (−5…+15 km, beyond the support on both sides), trench
 /// depths on a fifth of the samples, and the constants of `params` with a support S of 0.5–3 km.
 fn isostasy_case(crust: &mut Crust, rng: &mut SimRng) -> (IsostasyConstants, Vec<f32>, Vec<f32>) {
     let n = crust.len();
     let mut params = Params::default();
     params.isostasy.max_flexural_support_km = 0.5 + 2.5 * rng.next_f64();
     let iso = tectonic_planets::systems::relief::isostasy_params(&params);
-    let c = iso.constants(params.init.oceanic_thickness_km);
+    let mut c = iso.constants(params.init.oceanic_thickness_km);
+    // Caps inside the drawn ranges, so both sides of each are exercised.
+    c.max_oceanic_load_km = 3.0;
+    c.max_continental_km = 70.0;
     let mut w = vec![0.0f32; n];
     let mut trench = vec![0.0f32; n];
     for i in 0..n {
@@ -1681,9 +1684,10 @@ fn relief_on_the_gpu_backend_runs_isostasy_and_diffusion_on_the_device() {
         let up = after.uploaded_bytes - before.uploaded_bytes;
         let down = after.downloaded_bytes - before.downloaded_bytes;
         // Up: the elevation to diffuse, the ocean bits and the coast list; the thickness after
-        // the rivers and after the sediment (declared writes); the smoothed root and the trench
-        // depth; the front table (32 B a point) and gather indices (12 B a point); uniforms.
-        let up_bound = 5 * n4 + (n as u64).div_ceil(32) * 4 + 4 * coast + 44 * fronts + 4096;
+        // the rivers; the elevation and thickness the coasts cut; the thickness after the
+        // sediment (declared writes); the smoothed root and the trench depth; the front table
+        // (32 B a point) and gather indices (12 B a point); uniforms.
+        let up_bound = 7 * n4 + (n as u64).div_ceil(32) * 4 + 4 * coast + 44 * fronts + 4096;
         // Down: the elevation the isostasy left on the device (pulled by the drainage), the
         // thickness the uplift kernel thickened (pulled by the rivers), the age (pulled by the
         // sediment), the diffused elevation and the coast's receipts; the reduction (24 B and

@@ -43,6 +43,12 @@ pub struct IsostasyConstants {
     pub oceanic_thickness_km: f64,
     /// Sea-floor rise per km of load, (ρ_m − ρ_s)/(ρ_m − ρ_w).
     pub sediment_gain: f64,
+    /// Most load (km of crust above `oceanic_thickness_km`) that raises the sea floor: a
+    /// thicker column is held at that level (may be infinite).
+    pub max_oceanic_load_km: f64,
+    /// Most continental crust (km) that floats: a thicker column stands where one this thick
+    /// would (its excess root is lost to the mantle; may be infinite).
+    pub max_continental_km: f64,
 }
 
 /// The age–depth law sampled every `step_my` from age 0 (what
@@ -85,6 +91,12 @@ pub struct IsostasyUniforms {
     pub count: u32,
     /// Threads per dispatch row.
     pub row_stride: u32,
+    /// Most load that raises the sea floor, km (infinite becomes 1e30).
+    pub max_oceanic_load_km: f32,
+    /// Most continental crust that floats, km (infinite becomes 1e30).
+    pub max_continental_km: f32,
+    /// Padding to 16 bytes.
+    pub _pad: [u32; 2],
 }
 
 impl IsostasyUniforms {
@@ -103,6 +115,9 @@ impl IsostasyUniforms {
             table_last: table.depth_km.len().saturating_sub(2) as u32,
             count,
             row_stride: ROW_STRIDE,
+            max_oceanic_load_km: c.max_oceanic_load_km.min(1e30) as f32,
+            max_continental_km: c.max_continental_km.min(1e30) as f32,
+            _pad: [0; 2],
         }
     }
 }

@@ -64,6 +64,10 @@ fn plain() -> Result<Simulation, String> {
     Simulation::new(small_params()).map_err(|e| e.to_string())
 }
 
+/// The harness's screen, points: a 1280×1024 display (the left panel scrolls; at 800 points
+/// the parameters header sits below the schedule's fourteen sets).
+const SCREEN: (f32, f32) = (1280.0, 1024.0);
+
 struct Harness {
     ctx: egui::Context,
     app: ViewerApp,
@@ -90,7 +94,7 @@ impl Harness {
         let raw = egui::RawInput {
             screen_rect: Some(egui::Rect::from_min_size(
                 egui::Pos2::ZERO,
-                egui::vec2(1280.0, 800.0),
+                egui::vec2(SCREEN.0, SCREEN.1),
             )),
             time: Some(self.time),
             events,
@@ -145,7 +149,7 @@ impl Harness {
     fn click(&mut self, key: &str) {
         let c = self.rect(key).center();
         assert!(
-            c.x > 0.0 && c.y > 0.0 && c.x < 1280.0 && c.y < 800.0,
+            c.x > 0.0 && c.y > 0.0 && c.x < SCREEN.0 && c.y < SCREEN.1,
             "\"{key}\" is off the screen, at {c:?}"
         );
         self.click_at(c);

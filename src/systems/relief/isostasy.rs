@@ -129,6 +129,8 @@ impl IsostasyParams {
             max_support_km: self.max_support_km,
             oceanic_thickness_km,
             sediment_gain: self.sediment_gain(),
+            max_oceanic_load_km: f64::INFINITY,
+            max_continental_km: f64::INFINITY,
         }
     }
 }
@@ -518,6 +520,11 @@ impl RegionalIsostasy {
 /// on it, and below sea level the water load deepens it.
 #[inline]
 fn continental_surface_km(t_km: f64, root_km: f32, c: &IsostasyConstants) -> f32 {
+    let t_km = if t_km > c.max_continental_km {
+        c.max_continental_km
+    } else {
+        t_km
+    };
     let t0 = c.ref_thickness_km;
     let own = (t_km - t0) * c.root_ratio;
     let w = (root_km as f64).clamp(own - c.max_support_km, own + c.max_support_km);
@@ -535,10 +542,13 @@ fn continental_surface_km(t_km: f64, root_km: f32, c: &IsostasyConstants) -> f32
 /// [`RegionalIsostasy::smooth_root`]) and the trench depth of every sample (km below the floor
 /// beside it).
 ///
-/// - Continental samples of finite thickness T: h₀ + (T − T₀) − w', w' = w held within
-///   `c.max_support_km` of the sample's own root (T − T₀)·ρ_c/ρ_m, with the water load below
-///   sea level; a non-finite thickness leaves the elevation as it is.
-/// - Oceanic samples: −depth(age) (from `table`) + gain·(T − T_oc) − clamp(w, ±S) − trench.
+/// - Continental samples of finite thickness T (counted up to `c.max_continental_km`: a
+///   thicker column loses its excess root to the mantle, as over-thickened orogens delaminate):
+///   h₀ + (T − T₀) − w', w' = w held within `c.max_support_km` of the sample's own root
+///   (T − T₀)·ρ_c/ρ_m, with the water load below sea level; a non-finite thickness leaves the
+///   elevation as it is.
+/// - Oceanic samples: −depth(age) (from `table`) + gain·min(T − T_oc, `c.max_oceanic_load_km`)
+///   − clamp(w, ±S) − trench (a sediment pile or arc thicker than the cap is held at it).
 ///
 /// Computed in f64 from the f32 inputs and rounded once. Inputs shorter than `elevation_km`
 /// read as w = 0 and no trench.
@@ -561,7 +571,13 @@ pub fn isostasy_cpu(
         .for_each(|(i, z)| {
             let w = deflection_km.get(i).copied().unwrap_or(0.0);
             if crust_type[i] == CrustType::Oceanic {
-                let excess = thickness_km[i] as f64 - c.oceanic_thickness_km;
+                let load = thickness_km[i] as f64 - c.oceanic_thickness_km;
+                // (NaN stays NaN, as on the GPU.)
+                let excess = if load > c.max_oceanic_load_km {
+                    c.max_oceanic_load_km
+                } else {
+                    load
+                };
                 let wi = (w as f64).clamp(-support, support);
                 let trench = trench_km.get(i).copied().unwrap_or(0.0);
                 *z = (-table.depth_km(age_my[i] as f64) + c.sediment_gain * excess

@@ -664,7 +664,10 @@ pub fn apply_isostasy(
     let Some((_, _, table)) = state.table.as_ref() else {
         return;
     };
-    let c = iso.constants(params.init.oceanic_thickness_km);
+    let mut c = iso.constants(params.init.oceanic_thickness_km);
+    c.max_oceanic_load_km =
+        params.isostasy.max_oceanic_thickness_km - params.init.oceanic_thickness_km;
+    c.max_continental_km = params.isostasy.max_thickness_km;
     let w = state.iso.deflection_km();
     if on_device && let Some(ctx) = gpu.as_mut() {
         let tick = crust.last_changed();

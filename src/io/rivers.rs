@@ -5,7 +5,7 @@
 //! Rivers are the land samples whose drainage area is at least the threshold of
 //! [`river_threshold_km2`] (50,000 km² on a fine planet). Each is drawn from its sample to its
 //! receiver along the great circle, as wide as the log of its drainage area says; lakes (samples
-//! under a filled depression's water level) are drawn as water. Map conventions are those of
+//! under a filled depression's water level, at least 20 m deep) are drawn as water. Map conventions are those of
 //! [`crate::io::maps`] (equirectangular, row 0 north, column 0 at longitude −180°).
 
 use std::path::{Path, PathBuf};
@@ -87,7 +87,17 @@ impl RiverNetwork {
     pub fn is_lake(&self, i: usize) -> bool {
         i < self.len() && self.drainage.ocean.len() == self.len() && self.drainage.is_lake(i)
     }
+
+    /// Whether sample `i` is under a lake at least [`MIN_DRAWN_LAKE_DEPTH_KM`] deep: what
+    /// `rivers.png` draws as water (the shallow rims and the pans a few metres deep that dot a
+    /// flat plain are drawn as land).
+    pub fn is_drawn_lake(&self, i: usize) -> bool {
+        self.is_lake(i) && self.drainage.lake_depth_km(i) >= MIN_DRAWN_LAKE_DEPTH_KM
+    }
 }
+
+/// Shallowest water `rivers.png` draws as a lake, km (20 m).
+pub const MIN_DRAWN_LAKE_DEPTH_KM: f32 = 0.02;
 
 /// Width of a river of drainage area `area_km2` on a map `width` pixels wide, pixels.
 pub fn river_width_px(area_km2: f64, min_area_km2: f64, width: u32) -> f64 {
@@ -222,7 +232,7 @@ pub fn lake_pixels(mesh: &SphereMesh, net: &RiverNetwork, width: u32, height: u3
                 let weight: f64 = t
                     .iter()
                     .zip(loc.weights)
-                    .filter(|(s, _)| net.is_lake(**s as usize))
+                    .filter(|(s, _)| net.is_drawn_lake(**s as usize))
                     .map(|(_, w)| w)
                     .sum();
                 *o = weight >= 0.5;
@@ -247,7 +257,7 @@ pub fn draw_rivers(img: &mut RgbImage, positions: &[DVec3], net: &RiverNetwork) 
         if d.ocean[i] || r == i || r >= n || d.area_km2[i] < net.min_area_km2 {
             continue;
         }
-        if net.is_lake(i) && net.is_lake(r) {
+        if net.is_drawn_lake(i) && net.is_drawn_lake(r) {
             continue;
         }
         let width = river_width_px(d.area_km2[i], net.min_area_km2, img.width());

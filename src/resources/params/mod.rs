@@ -271,8 +271,8 @@ define_params! {
         ridge_depth_offset_km: f64 = 0.0, -3.0..=3.0, "km", "Added to the age–depth law's depth (0: the published law, ridges at −2.6 km for GDH1; 0.2 puts them at the observed −2.8 km, DESIGN §7, but pelagic sediment aside, old floor then stands deeper than observed).";
         trench_depth_km: f64 = 3.5, 0.0..=15.0, "km", "Depth of a trench below the sea floor beside it, at the subduction front (observed 3–4 km, DESIGN §7).";
         trench_width_km: f64 = 80.0, 1.0..=2000.0, "km", "Distance from the front over which the trench shallows to the sea floor on either side (profile (1 − |d|/w)²: about 50 km wide at half depth; observed trenches are 40–120 km wide, DESIGN §7).";
-        max_thickness_km: f64 = 75.0, 10.0..=300.0, "km", "Subduction and collisions never thicken continental crust beyond this (about 6.4 km of elevation under Airy isostasy at the defaults; the crust of Tibet is about 70 km thick).";
-        max_oceanic_thickness_km: f64 = 30.0, 1.0..=300.0, "km", "Subduction never thickens oceanic crust (island arcs) beyond this (about +3 km on old sea floor at the defaults; real arcs have 20–35 km of crust).";
+        max_thickness_km: f64 = 75.0, 10.0..=300.0, "km", "Subduction and collisions never thicken continental crust beyond this (about 6.4 km of elevation under Airy isostasy at the defaults; the crust of Tibet is about 70 km thick), and isostasy floats no more than this: a column made thicker by sediment or resampling stands where one this thick would (over-thickened roots delaminate: Kay & Kay 1993).";
+        max_oceanic_thickness_km: f64 = 30.0, 1.0..=300.0, "km", "Subduction never thickens oceanic crust (island arcs) beyond this (about +3 km on old sea floor at the defaults; real arcs have 20–35 km of crust), and isostasy counts no more load on oceanic crust than this thickness gives: a thicker sediment pile stands where this one would.";
     }
     /// Rivers: the drainage network, stream-power incision and hillslope diffusion.
     [rivers] Rivers {

@@ -32,17 +32,42 @@ pub struct CoastParams {
     pub open_depth_km: f64,
 }
 
-/// Scratch of [`coastal_erosion`], reused across steps.
+/// Scratch of [`coastal_erosion`], reused across steps: the widths of the last call (see
+/// [`CoastScratch::width_km`]) and buffers.
 #[derive(Default)]
 pub struct CoastScratch {
+    /// Width per sample; infinite except at the samples in `touched`.
     width: Vec<f32>,
+    /// Samples whose width was set by the last call.
+    touched: Vec<u32>,
+    /// Whether each sample was open sea in the last call.
+    open: Vec<bool>,
+    shallow: Vec<u32>,
     heap: std::collections::BinaryHeap<std::cmp::Reverse<(u32, u32)>>,
+    lower: Vec<(u32, f32)>,
+}
+
+impl CoastScratch {
+    /// Width of shallow sea (km) at sample `i` found by the last [`shallow_width_km`]: 0 on open
+    /// sea, the distance to open sea through shallow sea, infinite on land, on shallow seas with
+    /// no open water and out of range.
+    pub fn width_km(&self, i: usize) -> f32 {
+        if self.open.get(i).copied().unwrap_or(false) {
+            0.0
+        } else {
+            self.width.get(i).copied().unwrap_or(f32::INFINITY)
+        }
+    }
 }
 
 /// Width (km) of shallow sea between each sea sample and open water: the shortest path along the
 /// graph, through sea samples shallower than `open_depth_km`, to a sea sample deeper than it
 /// (0 for those; infinite for shallow seas with no open water). Land samples get infinity.
-/// Dijkstra from every open-sea sample, ties broken by index: deterministic.
+/// Read them with [`CoastScratch::width_km`].
+///
+/// Dijkstra from the open-sea samples next to shallow sea, ties broken by index: deterministic.
+/// Cost: one parallel pass over the samples, then work on the shallow sea only (the widths of
+/// the last call are reset sample by sample, not as a whole).
 pub fn shallow_width_km(
     g: &ReliefGraph,
     ocean: &[bool],
@@ -52,20 +77,43 @@ pub fn shallow_width_km(
 ) {
     let n = g.len();
     let open = -(open_depth_km as f32);
-    let width = &mut scratch.width;
-    width.clear();
-    width.resize(n, f32::INFINITY);
-    let heap = &mut scratch.heap;
+    let s = scratch;
+    if s.width.len() != n {
+        s.width.clear();
+        s.width.resize(n, f32::INFINITY);
+        s.touched.clear();
+    }
+    for &t in &s.touched {
+        s.width[t as usize] = f32::INFINITY;
+    }
+    s.touched.clear();
+    let (ocean, elevation_km) = (&ocean[..n], &elevation_km[..n]);
+    s.open.clear();
+    s.open.par_extend(
+        ocean
+            .par_iter()
+            .zip(elevation_km.par_iter())
+            .with_min_len(8192)
+            .map(|(&o, &z)| o && z <= open),
+    );
+    let shallow = |i: usize| ocean[i] && elevation_km[i] > open;
+    s.shallow.clear();
+    s.shallow.par_extend(
+        (0..n as u32)
+            .into_par_iter()
+            .with_min_len(8192)
+            .filter(|&i| shallow(i as usize)),
+    );
+    // Open samples next to shallow sea start the search.
+    let (width, touched, heap, is_open) = (&mut s.width, &mut s.touched, &mut s.heap, &s.open);
     heap.clear();
-    for i in 0..n {
-        if ocean[i] && elevation_km[i] <= open {
-            width[i] = 0.0;
-            // Only open samples next to shallow sea start a search.
-            if g.edges(i).any(|e| {
-                let j = g.neighbors[e] as usize;
-                ocean[j] && elevation_km[j] > open
-            }) {
-                heap.push(std::cmp::Reverse((0f32.to_bits(), i as u32)));
+    for &i in &s.shallow {
+        for e in g.edges(i as usize) {
+            let j = g.neighbors[e];
+            if is_open[j as usize] && width[j as usize] != 0.0 {
+                width[j as usize] = 0.0;
+                touched.push(j);
+                heap.push(std::cmp::Reverse((0f32.to_bits(), j)));
             }
         }
     }
@@ -77,11 +125,14 @@ pub fn shallow_width_km(
         }
         for e in g.edges(i) {
             let j = g.neighbors[e] as usize;
-            if !ocean[j] || elevation_km[j] <= open {
+            if !shallow(j) {
                 continue;
             }
             let dj = d + g.edge_km[e];
             if dj < width[j] {
+                if width[j] == f32::INFINITY {
+                    touched.push(j as u32);
+                }
                 width[j] = dj;
                 heap.push(std::cmp::Reverse((dj.to_bits(), j as u32)));
             }
@@ -90,12 +141,14 @@ pub fn shallow_width_km(
 }
 
 /// Lowers every land sample next to the sea by its coastal retreat over `dt_my` (see the module
-/// documentation), adding the thickness removed to `eroded_km`. `ocean` is the sea mask (lakes
+/// documentation): the surface and the crust's thickness go down alike, and what was removed is
+/// added to `eroded_km`. `ocean` is the sea mask (lakes
 /// are not sea: their waves are small). Returns the volume removed, km³.
 pub fn coastal_erosion(
     g: &ReliefGraph,
     ocean: &[bool],
     elevation_km: &mut [f32],
+    thickness_km: &mut [f32],
     eroded_km: &mut [f32],
     p: &CoastParams,
     dt_my: f64,
@@ -106,48 +159,51 @@ pub fn coastal_erosion(
         || dt_my <= 0.0
         || ocean.len() < n
         || elevation_km.len() < n
+        || thickness_km.len() < n
         || eroded_km.len() < n
     {
         return 0.0;
     }
     shallow_width_km(g, ocean, elevation_km, p.open_depth_km, scratch);
-    let width = &scratch.width;
+    let mut lower = std::mem::take(&mut scratch.lower);
+    lower.clear();
+    let sc = &*scratch;
     let base = -p.wave_base_km;
     let w0 = p.damping_width_km.max(1e-6);
     // Lowering of each coastal land sample, from the surface before any of them moved.
-    let lower: Vec<(u32, f32)> = (0..n)
-        .into_par_iter()
-        .with_min_len(8192)
-        .filter_map(|i| {
-            if ocean[i] {
-                return None;
-            }
-            let z = elevation_km[i] as f64;
-            if !(z > base) {
-                return None;
-            }
-            let w = g
-                .edges(i)
-                .filter(|&e| ocean[g.neighbors[e] as usize])
-                .map(|e| width[g.neighbors[e] as usize])
-                .fold(f32::INFINITY, f32::min);
-            if !w.is_finite() {
-                return None;
-            }
-            let dx = g.area_km2[i].max(1e-12).sqrt();
-            let v = p.retreat_km_per_my * (-(w as f64) / w0).exp();
-            let f = (v * dt_my / dx).min(1.0);
-            let d = ((z - base) * f) as f32;
-            (d > 0.0).then_some((i as u32, d))
-        })
-        .collect();
+    lower.par_extend((0..n).into_par_iter().with_min_len(8192).filter_map(|i| {
+        if ocean[i] {
+            return None;
+        }
+        let z = elevation_km[i] as f64;
+        if !(z > base) {
+            return None;
+        }
+        let w = g
+            .edges(i)
+            .filter(|&e| ocean[g.neighbors[e] as usize])
+            .map(|e| sc.width_km(g.neighbors[e] as usize))
+            .fold(f32::INFINITY, f32::min);
+        if !w.is_finite() {
+            return None;
+        }
+        let dx = g.area_km2[i].max(1e-12).sqrt();
+        let v = p.retreat_km_per_my * (-(w as f64) / w0).exp();
+        let f = (v * dt_my / dx).min(1.0);
+        let d = ((z - base) * f) as f32;
+        (d > 0.0).then_some((i as u32, d))
+    }));
+    // The rock leaves the surface and the crust alike (in index order: the sum is the same
+    // whatever the thread count).
     let mut volume = 0.0;
-    for (i, d) in lower {
+    for &(i, d) in &lower {
         let i = i as usize;
         elevation_km[i] -= d;
+        thickness_km[i] -= d;
         eroded_km[i] += d;
         volume += d as f64 * g.area_km2[i];
     }
+    scratch.lower = lower;
     volume
 }
 
@@ -195,27 +251,16 @@ pub fn erode_coasts(
     flux.eroded_km.resize(n, 0.0);
     let mut crust_res = crust;
     let crust = &mut *crust_res;
-    // The thickness removed per sample this step, apart from the rivers'.
-    let mut removed = vec![0.0f32; n];
     let volume = coastal_erosion(
         g,
         &network.drainage.ocean,
         &mut crust.elevation_km,
-        &mut removed,
+        &mut crust.thickness_km,
+        &mut flux.eroded_km,
         &coast_params(&params),
         params.time.time_step_my,
         &mut state.scratch,
     );
-    crust
-        .thickness_km
-        .par_iter_mut()
-        .zip(flux.eroded_km.par_iter_mut())
-        .zip(removed.par_iter())
-        .with_min_len(8192)
-        .for_each(|((t, e), &r)| {
-            *t -= r;
-            *e += r;
-        });
     flux.coastal_km3 = volume;
     flux.total_eroded_km3 += volume;
     super::after_write(&crust_res, &mut gpu, WRITES, declared);
@@ -272,13 +317,27 @@ mod tests {
         let (g, ocean, mut z) = planet(0.0);
         let before = z.clone();
         let mut eroded = vec![0.0f32; z.len()];
+        let mut t = vec![35.0f32; z.len()];
         let mut s = CoastScratch::default();
-        let v = coastal_erosion(&g, &ocean, &mut z, &mut eroded, &params(), 2.0, &mut s);
+        let v = coastal_erosion(
+            &g,
+            &ocean,
+            &mut z,
+            &mut t,
+            &mut eroded,
+            &params(),
+            2.0,
+            &mut s,
+        );
         let mut lowered = 0;
         let mut volume = 0.0;
         for i in 0..z.len() {
             // What left the surface is what was eroded, and nothing is cut below the wave base.
             assert!((before[i] - z[i] - eroded[i]).abs() < 1e-6, "sample {i}");
+            assert!(
+                (35.0 - t[i] - eroded[i]).abs() < 1e-5,
+                "thickness of sample {i}"
+            );
             assert!(eroded[i] >= 0.0);
             if eroded[i] > 0.0 {
                 lowered += 1;
@@ -298,7 +357,16 @@ mod tests {
         );
         // Many steps plane the coast down to the wave base.
         for _ in 0..200 {
-            coastal_erosion(&g, &ocean, &mut z, &mut eroded, &params(), 2.0, &mut s);
+            coastal_erosion(
+                &g,
+                &ocean,
+                &mut z,
+                &mut t,
+                &mut eroded,
+                &params(),
+                2.0,
+                &mut s,
+            );
         }
         for i in 0..z.len() {
             if eroded[i] > 0.0 {
@@ -313,10 +381,12 @@ mod tests {
         for (k, shelf) in [0.0, 400.0].into_iter().enumerate() {
             let (g, ocean, mut z) = planet(shelf);
             let mut eroded = vec![0.0f32; z.len()];
+            let mut t = vec![35.0f32; z.len()];
             cut[k] = coastal_erosion(
                 &g,
                 &ocean,
                 &mut z,
+                &mut t,
                 &mut eroded,
                 &params(),
                 2.0,
@@ -342,15 +412,15 @@ mod tests {
         let mut seen = 0;
         for i in 0..g.len() {
             if !ocean[i] {
-                assert!(s.width[i].is_infinite());
+                assert!(s.width_km(i).is_infinite());
             } else if z[i] < -1.0 {
-                assert_eq!(s.width[i], 0.0);
+                assert_eq!(s.width_km(i), 0.0);
             } else {
                 // A shallow sample: at most the band's width (plus one sample of slack), > 0.
                 assert!(
-                    s.width[i] > 0.0 && s.width[i] < 300.0 + 2.0 * spacing,
+                    s.width_km(i) > 0.0 && s.width_km(i) < 300.0 + 2.0 * spacing,
                     "{}",
-                    s.width[i]
+                    s.width_km(i)
                 );
                 seen += 1;
             }

@@ -7,7 +7,7 @@
 //!
 //! Each test was seen to fail once with the code broken on purpose: the break is named in the
 //! test's doc comment ("Seen to fail: ...").
-
+#![allow(clippy::needless_range_loop)] // per-sample loops over parallel arrays read best indexed
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use std::cmp::Reverse;
@@ -1267,9 +1267,7 @@ fn sea_mask_leaves_walled_in_basins_to_the_land() {
             (-0.1, false) // flooded shelf, continental crust
         } else if within(i, depression, 500.0) {
             (-0.5, false)
-        } else if within(i, speck, 200.0) {
-            (-3.0, true)
-        } else if within(i, basin, 600.0) {
+        } else if within(i, speck, 200.0) || within(i, basin, 600.0) {
             (-3.0, true)
         } else {
             ((0.2 + 1.0 * (1.0 - d / 5000.0)) as f32, false)

@@ -171,7 +171,7 @@ fn load_convergence(world: &mut World, r: &mut SectionReader, _v: u32) -> Result
     };
     let per_sample_u = |v: Vec<u32>, what: &str| -> Result<Vec<u32>, String> {
         if v.len() != n || v.iter().any(|&p| p != u32::MAX && p as usize >= m) {
-            return Err(format!("{what} is inconsistent").into());
+            return Err(format!("{what} is inconsistent"));
         }
         Ok(v)
     };

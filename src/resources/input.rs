@@ -148,7 +148,7 @@ pub fn clip_to(s: &str, max: usize) -> String {
     let mut out = String::new();
     for (shown, c) in s.chars().enumerate() {
         if shown >= max {
-            out.push_str("…");
+            out.push('…');
             return out;
         }
         if c.is_control() {

@@ -83,7 +83,7 @@ impl PluginParams {
             return Err(format!(
                 "plugin parameter \"{}\" must have a key plugins.<plugin>.<name> made of its section \"{}\" and name \"{}\"",
                 spec.key, spec.section, spec.name
-            ).into());
+            ));
         }
         let kind_ok = matches!(
             (spec.kind, spec.default),
@@ -95,8 +95,7 @@ impl PluginParams {
             return Err(format!(
                 "plugin parameter \"{}\" has a default of the wrong kind or an empty range",
                 spec.key
-            )
-            .into());
+            ));
         }
         check_value(spec, bounds_of(spec), spec.default)
             .map(|_| ())

@@ -144,6 +144,7 @@ pub fn shallow_width_km(
 /// documentation): the surface and the crust's thickness go down alike, and what was removed is
 /// added to `eroded_km`. `ocean` is the sea mask (lakes
 /// are not sea: their waves are small). Returns the volume removed, km³.
+#[allow(clippy::too_many_arguments, clippy::neg_cmp_op_on_partial_ord)]
 pub fn coastal_erosion(
     g: &ReliefGraph,
     ocean: &[bool],
@@ -226,6 +227,7 @@ pub fn coast_params(params: &Params) -> CoastParams {
 
 /// Coastal erosion (phenomenon `coasts`): coasts facing open water retreat and leave a platform
 /// at the wave base; the rock removed joins what the rivers carry (to the sediment routing).
+#[allow(clippy::too_many_arguments)]
 pub fn erode_coasts(
     params: Res<Params>,
     mesh: Res<SphereMesh>,

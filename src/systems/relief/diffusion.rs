@@ -154,7 +154,7 @@ fn apply_land_change(
 /// those not in `ocean`; ocean samples are held at sea level and receive the coastal outflow,
 /// accumulated (+=) into `to_ocean_km3` (km³ per ocean sample). Writes the change of every
 /// sample (km; 0 in the ocean) to `delta_km` and applies it to `elevation_km`.
-#[allow(clippy::too_many_arguments)]
+#[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
 pub fn diffuse_land(
     g: &ReliefGraph,
     elevation_km: &mut [f32],

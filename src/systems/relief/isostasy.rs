@@ -442,6 +442,7 @@ impl RegionalIsostasy {
     /// smoothed by the regional kernel of `p` into the deflection w = G∗r, left in
     /// [`RegionalIsostasy::deflection_km`]. Returns the number of smoothing passes used (0 when
     /// an input is shorter than the graph, leaving the deflection as it was).
+    #[allow(clippy::needless_range_loop)]
     pub fn smooth_root(
         &mut self,
         g: &ReliefGraph,

@@ -279,6 +279,7 @@ fn after_write(
 }
 
 /// Builds the drainage network of the current surface (phenomenon `drainage`).
+#[allow(clippy::too_many_arguments)]
 pub fn build_drainage(
     params: Res<Params>,
     mesh: Res<SphereMesh>,

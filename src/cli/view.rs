@@ -85,6 +85,7 @@ pub(crate) fn view(a: ViewArgs) -> Result<()> {
         }
     };
     let switches = a.planet.switches.clone();
+    let backend = a.planet.backend;
     let build = move || -> std::result::Result<Simulation, String> {
         let mut sim = match source {
             Err(path) => save::load_from_file(&path).map_err(|e| e.to_string())?,
@@ -97,6 +98,12 @@ pub(crate) fn view(a: ViewArgs) -> Result<()> {
         };
         apply_switches(&mut sim, &switches.enable, &switches.disable)
             .map_err(|e| format!("{e:#}"))?;
+        // The viewer steps on the backend --backend picks (auto: a hardware GPU when there is
+        // one), as generate does.
+        let note = sim
+            .set_backend(backend)
+            .map_err(|e| format!("could not start the GPU compute backend: {e}"))?;
+        tracing::info!("{note}");
         Ok(sim)
     };
     let opts = tectonic_planets::viewer::ViewerOptions {

@@ -488,12 +488,13 @@ impl ViewerApp {
             ui.separator();
             if let Some(s) = &self.snap {
                 ui.label(format!(
-                    "{:.0} My · step {} · {} plates · land {:.1}% · {} samples · {:.0} fps",
+                    "{:.0} My · step {} · {} plates · land {:.1}% · {} samples · {} · {:.0} fps",
                     s.time_my,
                     s.step,
                     s.plates.len(),
                     100.0 * s.stats.land_fraction,
                     s.samples,
+                    super::worker::backend_name(s.backend),
                     self.frames.recent_fps()
                 ));
             } else {

@@ -1014,3 +1014,50 @@ fn velocity_arrows_drawn_into_the_map_texture_change_it_in_their_colour_only() {
         "arrows are drawn in their colour"
     );
 }
+
+#[test]
+fn a_new_or_loaded_planet_stays_on_the_gpu_backend() {
+    // Needs a wgpu adapter (lavapipe in CI); without one there is nothing to keep.
+    let mut probe = Simulation::new(small_params()).unwrap();
+    if probe.set_backend(crate::gpu::BackendChoice::Gpu).is_err() {
+        eprintln!("no wgpu adapter: skipped");
+        return;
+    }
+    drop(probe);
+    let dir = temp_dir("backend");
+    let file = dir.join("gpu.planet");
+    let mut h = Harness::new(|| {
+        let mut sim = Simulation::new(small_params()).map_err(|e| e.to_string())?;
+        sim.set_backend(crate::gpu::BackendChoice::Gpu)
+            .map_err(|e| e.to_string())?;
+        Ok(sim)
+    });
+    let on = |h: &Harness| h.app.snap.as_ref().unwrap().backend;
+    assert_eq!(on(&h), crate::gpu::ComputeBackend::Gpu);
+    h.step(1);
+    // New planet from the parameters panel.
+    let snap = h.app.snap.clone().unwrap();
+    h.app.param_text.insert("planet.seed".into(), "78".into());
+    assert!(h.app.apply_params(&snap, true), "{:?}", h.app.param_errors);
+    h.settle();
+    assert_eq!(h.app.snap.as_ref().unwrap().params.planet.seed, 78);
+    assert_eq!(on(&h), crate::gpu::ComputeBackend::Gpu, "new planet");
+    h.step(1);
+    // Saved and loaded back.
+    h.app.file_path = file.display().to_string();
+    h.frame(Vec::new());
+    h.click("save");
+    h.settle();
+    h.click("load");
+    h.settle();
+    let snap = h.app.snap.clone().unwrap();
+    assert!(
+        snap.log
+            .iter()
+            .any(|l| l.starts_with("loaded") && l.contains("(GPU)")),
+        "{:?}",
+        snap.log
+    );
+    assert_eq!(on(&h), crate::gpu::ComputeBackend::Gpu, "loaded planet");
+    h.finish();
+}

@@ -16,6 +16,7 @@ use crate::commands::{Command, LatLon, Outcome};
 use crate::components::{Plate, PlateFrame, SubductionFront, Terrane};
 use crate::geometry::SphereMesh;
 use crate::geometry::spherical::to_lat_lon_deg;
+use crate::gpu::{BackendChoice, ComputeBackend};
 use crate::io::maps::{Raster, write_all_maps};
 use crate::io::rivers::{RiverNetwork, write_rivers};
 use crate::io::save::{self, CommandHistory};
@@ -236,6 +237,8 @@ pub struct Snapshot {
     pub mesh_generation: u64,
     /// Number of samples.
     pub samples: usize,
+    /// Where the kernels run.
+    pub backend: ComputeBackend,
     /// Planet radius, km.
     pub radius_km: f64,
     /// The crust as after a resampling now (world frame, reference mesh).
@@ -507,7 +510,14 @@ impl Worker {
         }
     }
 
-    fn replace_sim(&mut self, sim: Simulation) {
+    /// Puts `sim` in place of the planet, on the compute backend the old one ran on (the GPU
+    /// when it had a device; a message says so when the new one cannot get one).
+    fn replace_sim(&mut self, mut sim: Simulation) {
+        if self.sim.backend() == ComputeBackend::Gpu
+            && let Err(e) = sim.set_backend(BackendChoice::Gpu)
+        {
+            self.say(format!("the new planet runs on the CPU: {e}"));
+        }
         self.sim = sim;
         self.lookup = Arc::new(PixelLookup::build(self.sim.mesh(), MAP_WIDTH, MAP_HEIGHT));
         self.positions = Arc::new(self.sim.mesh().positions.clone());
@@ -659,7 +669,11 @@ impl Worker {
             Request::NewPlanet(p) => match Simulation::with_plugins(*p, (self.plugins)()) {
                 Ok(sim) => {
                     self.replace_sim(sim);
-                    self.say(format!("new planet: {} samples", self.sim.mesh().len()));
+                    self.say(format!(
+                        "new planet: {} samples ({})",
+                        self.sim.mesh().len(),
+                        backend_name(self.sim.backend())
+                    ));
                 }
                 Err(e) => self.say(format!("could not build the planet: {e}")),
             },
@@ -684,7 +698,11 @@ impl Worker {
             Request::Load(path) => match save::load_from_file_with(&path, (self.plugins)()) {
                 Ok(sim) => {
                     self.replace_sim(sim);
-                    self.say(format!("loaded {}", path.display()));
+                    self.say(format!(
+                        "loaded {} ({})",
+                        path.display(),
+                        backend_name(self.sim.backend())
+                    ));
                 }
                 Err(e) => self.say(format!("load failed: {e}")),
             },
@@ -829,6 +847,7 @@ impl Worker {
             run_until_my: self.run_until_my,
             mesh_generation: self.mesh_generation,
             samples: self.sim.mesh().len(),
+            backend: self.sim.backend(),
             radius_km,
             crust,
             lookup: self.lookup.clone(),
@@ -859,5 +878,13 @@ pub fn describe_outcome(o: &Outcome) -> String {
         Outcome::Uplift { samples } => format!("{samples} samples raised or lowered"),
         Outcome::Phenomenon => "phenomenon switched".into(),
         Outcome::Param { key } => format!("{key} set"),
+    }
+}
+
+/// How the viewer names a compute backend in its messages.
+pub(crate) fn backend_name(b: ComputeBackend) -> &'static str {
+    match b {
+        ComputeBackend::Cpu => "CPU",
+        ComputeBackend::Gpu => "GPU",
     }
 }

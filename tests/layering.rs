@@ -31,13 +31,14 @@ fn strip(source: &str) -> String {
     let mut out = String::with_capacity(source.len());
     let mut i = 0;
     while i < b.len() {
-        if source[i..].starts_with("//") {
+        if b[i..].starts_with(b"//") {
             while i < b.len() && b[i] != b'\n' {
                 i += 1;
             }
-        } else if source[i..].starts_with("/*") {
-            let end = source[i + 2..]
-                .find("*/")
+        } else if b[i..].starts_with(b"/*") {
+            let end = b[i + 2..]
+                .windows(2)
+                .position(|w| w == b"*/")
                 .map_or(b.len(), |e| i + 2 + e + 2);
             i = end;
         } else if b[i] == b'"' {
@@ -47,7 +48,7 @@ fn strip(source: &str) -> String {
             }
             i += 1;
             out.push_str("\"\"");
-        } else if source[i..].starts_with("#[cfg(test)]") {
+        } else if b[i..].starts_with(b"#[cfg(test)]") {
             // Skip the attribute and the item after it (up to its matching closing brace, or
             // its semicolon for `mod tests;`).
             i += "#[cfg(test)]".len();
@@ -71,6 +72,8 @@ fn strip(source: &str) -> String {
                 i += 1;
             }
         } else {
+            // Bytes, not chars: a multi-byte character (in a char literal, say) is copied
+            // byte by byte as Latin-1, which no identifier contains.
             out.push(b[i] as char);
             i += 1;
         }

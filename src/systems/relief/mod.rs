@@ -50,7 +50,7 @@ use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 
 use self::diffusion::{DiffusionBudget, DiffusionScratch, diffuse_land, diffuse_land_gpu};
-use self::drainage::{Drainage, sea_mask};
+use self::drainage::{Drainage, SeaMaskScratch, sea_mask_with};
 use self::graph::ReliefGraph;
 use self::isostasy::{AgeDepthLaw, AgeDepthTable, IsostasyParams, RegionalIsostasy, isostasy_cpu};
 use self::sediment::{SedimentBudget, SedimentParams, SedimentRouter};
@@ -195,6 +195,7 @@ pub struct ReliefState {
     spl: StreamPowerScratch,
     diffusion: DiffusionScratch,
     router: SedimentRouter,
+    sea: SeaMaskScratch,
     oceanic: Vec<bool>,
     continental: Vec<bool>,
     fill: Vec<f32>,
@@ -306,12 +307,13 @@ pub fn build_drainage(
         return;
     };
     let mut ocean = std::mem::take(&mut network.drainage.ocean);
-    sea_mask(
+    sea_mask_with(
         g,
         &crust.elevation_km,
         &state.oceanic,
         params.rivers.min_sea_area_km2,
         &mut ocean,
+        &mut state.sea,
     );
     let rain = rain.as_ref().map(|r| &r.0[..]).filter(|r| r.len() == n);
     network

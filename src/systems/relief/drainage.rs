@@ -277,17 +277,20 @@ impl Drainage {
                                 g.neighbor_start[i + 1] as usize,
                             );
                             let (nb, inv) = (&g.neighbors[a..b], &g.inv_edge_km[a..b]);
+                            let mut best_k = 0;
                             for k in 0..nb.len() {
                                 // inv = 0 for degenerate edges: slope 0, never chosen.
                                 let s = (hi - h[nb[k] as usize]) * inv[k];
                                 if s > best {
                                     best = s;
-                                    r = nb[k];
+                                    best_k = k;
                                 }
                             }
-                            if r != i as u32 {
-                                let k = nb.iter().position(|&x| x == r).unwrap_or(0);
-                                d = g.edge_km[a + k];
+                            // The strict `>` keeps the first of equal slopes, so `best_k` is
+                            // the first edge to the receiver.
+                            if best > 0.0 {
+                                r = nb[best_k];
+                                d = g.edge_km[a + best_k];
                             }
                         }
                         rs[k] = r;

@@ -529,21 +529,28 @@ pub fn deposit_sediment(
     let max_age = params.sediment.pelagic_max_age_my as f32;
     if rate_km > 0.0 {
         let ocean = &network.drainage.ocean;
-        let added: Vec<f64> = crust
+        let (oceanic, age) = (&state.oceanic, &crust.age_my);
+        let rains = |i: usize| oceanic[i] && ocean[i] && age[i] < max_age;
+        crust
             .thickness_km
             .par_iter_mut()
             .enumerate()
             .with_min_len(8192)
-            .map(|(i, t)| {
-                if state.oceanic[i] && ocean[i] && crust.age_my[i] < max_age {
+            .for_each(|(i, t)| {
+                if rains(i) {
                     *t += rate_km as f32;
+                }
+            });
+        // Summed in index order, as before (no per-step buffer).
+        flux.pelagic_km3 = (0..crust.thickness_km.len())
+            .map(|i| {
+                if rains(i) {
                     rate_km * g.area_km2[i]
                 } else {
                     0.0
                 }
             })
-            .collect();
-        flux.pelagic_km3 = added.iter().sum();
+            .sum();
     } else {
         flux.pelagic_km3 = 0.0;
     }

@@ -1242,6 +1242,122 @@ fn ocean_depth_follows_the_published_laws() {
 // ---------------------------------------------------------------------------------------------
 // The sea mask.
 
+/// The sea mask as first written: one breadth-first search per body of water (samples at or
+/// below sea level), bodies in index order, the area summed in search order.
+fn sea_mask_reference(g: &ReliefGraph, h: &[f32], always_sea: &[bool], min_area: f64) -> Vec<bool> {
+    let n = g.len();
+    let below = |i: usize| !(h.get(i).copied().unwrap_or(0.0) > 0.0);
+    let (mut out, mut seen) = (vec![false; n], vec![false; n]);
+    for start in 0..n {
+        if seen[start] || !below(start) {
+            continue;
+        }
+        let mut body = vec![start as u32];
+        seen[start] = true;
+        let (mut head, mut area, mut open) = (0, 0.0f64, false);
+        while head < body.len() {
+            let i = body[head] as usize;
+            head += 1;
+            area += g.area_km2[i];
+            open |= always_sea.get(i).copied().unwrap_or(false);
+            for &j in g.neighbors_of(i) {
+                let j = j as usize;
+                if !seen[j] && below(j) {
+                    seen[j] = true;
+                    body.push(j as u32);
+                }
+            }
+        }
+        if open && area >= min_area {
+            for &i in &body {
+                out[i as usize] = true;
+            }
+        }
+    }
+    out
+}
+
+/// The union–find sea mask is the breadth-first one exactly, on noise with many bodies of
+/// water, with thresholds at each open body's own area (summed as the search sums it, where the
+/// summation order decides), one ulp either side, none and infinite; and on a graph with
+/// one-way edges (the breadth-first fallback). Seen to fail: re-summing in search order only
+/// where the index-order sum equals the threshold (no rounding margin).
+#[test]
+fn sea_mask_matches_the_breadth_first_reference() {
+    let (mesh, g) = mesh_graph(20_000);
+    let n = g.len();
+    let h: Vec<f32> = mesh
+        .positions
+        .iter()
+        .map(|&p| (fbm(p, 11, 800.0, 4) + 0.1) as f32)
+        .collect();
+    let oceanic: Vec<bool> = (0..n)
+        .map(|i| !mix64(i as u64 ^ 0x5ea).is_multiple_of(3))
+        .collect();
+    // Areas of the open bodies, as the reference sums them.
+    let mut thresholds = vec![0.0, f64::INFINITY, f64::NAN, 1e12];
+    let mut seen = vec![false; n];
+    for start in 0..n {
+        if seen[start] || h[start] > 0.0 {
+            continue;
+        }
+        let mut body = vec![start];
+        seen[start] = true;
+        let (mut head, mut area) = (0, 0.0f64);
+        while head < body.len() {
+            let i = body[head];
+            head += 1;
+            area += g.area_km2[i];
+            for &j in g.neighbors_of(i) {
+                let j = j as usize;
+                if !seen[j] && h[j] <= 0.0 {
+                    seen[j] = true;
+                    body.push(j);
+                }
+            }
+        }
+        if body.len() > 1 && thresholds.len() < 40 {
+            thresholds.extend([area, area.next_up(), area.next_down()]);
+        }
+    }
+    assert!(
+        thresholds.len() > 20,
+        "too few bodies of water: {}",
+        thresholds.len()
+    );
+    let mut mask = Vec::new();
+    for &t in &thresholds {
+        sea_mask(g, &h, &oceanic, t, &mut mask);
+        assert!(
+            mask == sea_mask_reference(g, &h, &oceanic, t),
+            "sea mask differs at threshold {t}"
+        );
+    }
+    // One-way edges: drop every fifth edge.
+    let nbrs: Vec<u32> = g
+        .neighbors
+        .iter()
+        .enumerate()
+        .map(|(e, &j)| if e % 5 == 0 { u32::MAX } else { j })
+        .collect();
+    let oneway = ReliefGraph::new(
+        &mesh.positions,
+        &g.neighbor_start,
+        &nbrs,
+        None,
+        Some(&mesh.area_km2),
+        RADIUS_KM,
+    );
+    assert!(!oneway.is_symmetric());
+    for &t in &thresholds[..8] {
+        sea_mask(&oneway, &h, &oceanic, t, &mut mask);
+        assert!(
+            mask == sea_mask_reference(&oneway, &h, &oceanic, t),
+            "sea mask differs on one-way edges at threshold {t}"
+        );
+    }
+}
+
 /// On a continent (a 5000 km cap at +0.2…1.2 km with a flooded shelf at its edge) in an ocean:
 /// a continental depression below sea level, a speck of oceanic crust smaller than
 /// `min_sea_area_km2` and a larger oceanic basin, each walled in by land. Only the ocean, the

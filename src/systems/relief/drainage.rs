@@ -277,17 +277,20 @@ impl Drainage {
                                 g.neighbor_start[i + 1] as usize,
                             );
                             let (nb, inv) = (&g.neighbors[a..b], &g.inv_edge_km[a..b]);
+                            let mut best_k = 0;
                             for k in 0..nb.len() {
                                 // inv = 0 for degenerate edges: slope 0, never chosen.
                                 let s = (hi - h[nb[k] as usize]) * inv[k];
                                 if s > best {
                                     best = s;
-                                    r = nb[k];
+                                    best_k = k;
                                 }
                             }
-                            if r != i as u32 {
-                                let k = nb.iter().position(|&x| x == r).unwrap_or(0);
-                                d = g.edge_km[a + k];
+                            // The strict `>` keeps the first of equal slopes, so `best_k` is
+                            // the first edge to the receiver.
+                            if best > 0.0 {
+                                r = nb[best_k];
+                                d = g.edge_km[a + best_k];
                             }
                         }
                         rs[k] = r;
@@ -561,8 +564,7 @@ impl Drainage {
 /// Dead Sea are land basins, not ocean); otherwise one such speck would take the sediment of the
 /// land around it. NaN counts as sea level.
 ///
-/// Cost: one breadth-first search over the samples at or below sea level, in index order (the
-/// result does not depend on the thread count).
+/// Allocates its scratch; [`sea_mask_with`] reuses one.
 pub fn sea_mask(
     g: &ReliefGraph,
     elevation_km: &[f32],
@@ -570,15 +572,208 @@ pub fn sea_mask(
     min_sea_area_km2: f64,
     out: &mut Vec<bool>,
 ) {
+    sea_mask_with(
+        g,
+        elevation_km,
+        always_sea,
+        min_sea_area_km2,
+        out,
+        &mut SeaMaskScratch::default(),
+    );
+}
+
+/// Reusable buffers of [`sea_mask_with`] (grow to the graph size on first use).
+#[derive(Clone, Debug, Default)]
+pub struct SeaMaskScratch {
+    /// Union–find parent per sample at or below sea level (after the labelling pass: the
+    /// body's smallest sample index).
+    parent: Vec<u32>,
+    /// Per body (at its smallest index): area summed in index order, km².
+    area: Vec<f64>,
+    /// Per body (at its smallest index): `OPEN` and `SEA` bits.
+    flags: Vec<u8>,
+    queue: Vec<u32>,
+    seen: Vec<bool>,
+}
+
+const OPEN: u8 = 1;
+const SEA: u8 = 2;
+
+/// [`sea_mask`] with an explicit scratch.
+///
+/// Method: the bodies of water are the connected components of the samples at or below sea
+/// level, labelled by a union–find pass in index order (each body is named by its smallest
+/// sample, which is also where the breadth-first search of the original formulation started),
+/// then their areas are summed in index order. The area of a body whose sum lies so close to
+/// `min_sea_area_km2` that the summation order could matter (within the rounding bound of an
+/// n-term sum) is summed again in breadth-first order from its smallest sample, the order of
+/// the reference formulation, so the mask is exactly that of a breadth-first search over the
+/// bodies in index order. A graph with one-way edges gets that search directly.
+///
+/// Cost: O(n α(n)) sequential, cache-friendly (samples are stored along a space-filling curve);
+/// the final write is parallel. The result does not depend on the thread count.
+pub fn sea_mask_with(
+    g: &ReliefGraph,
+    elevation_km: &[f32],
+    always_sea: &[bool],
+    min_sea_area_km2: f64,
+    out: &mut Vec<bool>,
+    s: &mut SeaMaskScratch,
+) {
     let n = g.len();
     out.clear();
     out.resize(n, false);
+    if n == 0 {
+        return;
+    }
+    let elev = &elevation_km[..elevation_km.len().min(n)];
     let below = |i: usize| -> bool {
-        let z = elevation_km.get(i).copied().unwrap_or(0.0);
-        !(z > 0.0)
+        match elev.get(i) {
+            Some(&z) => z.is_nan() || z <= 0.0,
+            None => true,
+        }
     };
-    let mut seen = vec![false; n];
-    let mut body: Vec<u32> = Vec::new();
+    let open_at = |i: usize| always_sea.get(i).copied().unwrap_or(false);
+    if !g.is_symmetric() {
+        sea_mask_bfs(g, &below, &open_at, min_sea_area_km2, out, s);
+        return;
+    }
+    s.parent.resize(n, 0);
+    s.area.resize(n, 0.0);
+    s.flags.resize(n, 0);
+    let parent = &mut s.parent[..];
+    // 1. Union–find over the edges j < i between samples at or below sea level; a root is
+    //    always the smallest sample of its set (the larger root is linked under the smaller).
+    #[inline]
+    fn find(parent: &mut [u32], mut x: u32) -> u32 {
+        loop {
+            let p = parent[x as usize];
+            if p == x {
+                return x;
+            }
+            let gp = parent[p as usize];
+            parent[x as usize] = gp;
+            if gp == p {
+                return p;
+            }
+            x = gp;
+        }
+    }
+    for i in 0..n {
+        if !below(i) {
+            continue;
+        }
+        let mut ri = i as u32;
+        parent[i] = ri;
+        for &j in g.neighbors_of(i) {
+            if j as usize >= i || !below(j as usize) {
+                continue;
+            }
+            let rj = find(parent, j);
+            if rj < ri {
+                parent[ri as usize] = rj;
+                ri = rj;
+            } else if rj > ri {
+                parent[rj as usize] = ri;
+            }
+        }
+    }
+    // 2. Label every sample with its body (full compression) and sum the bodies in index
+    //    order; a body's smallest sample comes first.
+    let mut negative = false;
+    for i in 0..n {
+        if !below(i) {
+            continue;
+        }
+        let r = find(parent, i as u32) as usize;
+        parent[i] = r as u32;
+        if r == i {
+            s.area[r] = 0.0;
+            s.flags[r] = 0;
+        }
+        let a = g.area_km2[i];
+        negative |= a.is_nan() || a < 0.0;
+        s.area[r] += a;
+        if open_at(i) {
+            s.flags[r] |= OPEN;
+        }
+    }
+    // 3. Decide each open body. Two summation orders of m terms differ by at most
+    //    2(m − 1)·u·Σ|a| (u = 2⁻⁵³); closer than that to the threshold, or with negative
+    //    areas, the body is summed again in the reference (breadth-first) order.
+    let margin = 4.0 * n as f64 * f64::EPSILON;
+    for r in 0..n {
+        if !below(r) || s.parent[r] as usize != r || s.flags[r] & OPEN == 0 {
+            continue;
+        }
+        let a = s.area[r];
+        let area = if negative || (a - min_sea_area_km2).abs() <= margin * a.abs() {
+            bfs_body_area(g, &below, r, &mut s.queue, &mut s.seen)
+        } else {
+            a
+        };
+        if area >= min_sea_area_km2 {
+            s.flags[r] |= SEA;
+        }
+    }
+    // 4. Write the mask.
+    const CH: usize = 16384;
+    let (parent, flags) = (&s.parent, &s.flags);
+    out.par_chunks_mut(CH).enumerate().for_each(|(c, o)| {
+        let base = c * CH;
+        for (k, o) in o.iter_mut().enumerate() {
+            let i = base + k;
+            *o = below(i) && flags[parent[i] as usize] & SEA != 0;
+        }
+    });
+}
+
+/// Area of the body of water containing `start`, summed in breadth-first order from `start`
+/// (neighbours in CSR order), as the reference formulation sums it.
+fn bfs_body_area(
+    g: &ReliefGraph,
+    below: &dyn Fn(usize) -> bool,
+    start: usize,
+    queue: &mut Vec<u32>,
+    seen: &mut Vec<bool>,
+) -> f64 {
+    seen.resize(g.len(), false);
+    queue.clear();
+    queue.push(start as u32);
+    seen[start] = true;
+    let (mut head, mut area) = (0, 0.0f64);
+    while head < queue.len() {
+        let i = queue[head] as usize;
+        head += 1;
+        area += g.area_km2[i];
+        for &j in g.neighbors_of(i) {
+            let j = j as usize;
+            if !seen[j] && below(j) {
+                seen[j] = true;
+                queue.push(j as u32);
+            }
+        }
+    }
+    for &i in queue.iter() {
+        seen[i as usize] = false;
+    }
+    area
+}
+
+/// The reference formulation of [`sea_mask`]: one breadth-first search per body, bodies in
+/// index order (used when the graph has one-way edges, where bodies are not components).
+fn sea_mask_bfs(
+    g: &ReliefGraph,
+    below: &dyn Fn(usize) -> bool,
+    open_at: &dyn Fn(usize) -> bool,
+    min_sea_area_km2: f64,
+    out: &mut [bool],
+    s: &mut SeaMaskScratch,
+) {
+    let n = g.len();
+    s.seen.clear();
+    s.seen.resize(n, false);
+    let (seen, body) = (&mut s.seen, &mut s.queue);
     for start in 0..n {
         if seen[start] || !below(start) {
             continue;
@@ -591,7 +786,7 @@ pub fn sea_mask(
             let i = body[head] as usize;
             head += 1;
             area += g.area_km2[i];
-            open |= always_sea.get(i).copied().unwrap_or(false);
+            open |= open_at(i);
             for &j in g.neighbors_of(i) {
                 let j = j as usize;
                 if !seen[j] && below(j) {
@@ -601,9 +796,10 @@ pub fn sea_mask(
             }
         }
         if open && area >= min_sea_area_km2 {
-            for &i in &body {
+            for &i in body.iter() {
                 out[i as usize] = true;
             }
         }
     }
+    seen.iter_mut().for_each(|x| *x = false);
 }

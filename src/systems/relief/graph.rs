@@ -31,6 +31,11 @@ pub struct ReliefGraph {
     pub radius_km: f64,
     /// Mean edge length, km.
     pub mean_spacing_km: f64,
+    /// True when every edge i → j (j ≠ i) has its reverse j → i, as in a Delaunay mesh. Passes
+    /// that treat the graph as undirected (connected components) rely on it and fall back to
+    /// directed searches otherwise. Computed by [`ReliefGraph::new`]; editing `neighbors`
+    /// afterwards does not update it.
+    symmetric: bool,
 }
 
 impl ReliefGraph {
@@ -150,7 +155,14 @@ impl ReliefGraph {
             .iter()
             .map(|&d| if d > 0.0 { 1.0 / d } else { 0.0 })
             .collect();
+        let list = |i: usize| &nbrs[start[i] as usize..start[i + 1] as usize];
+        let symmetric = (0..n).into_par_iter().with_min_len(4096).all(|i| {
+            list(i)
+                .iter()
+                .all(|&j| j as usize == i || list(j as usize).contains(&(i as u32)))
+        });
         Self {
+            symmetric,
             inv_edge_km,
             neighbor_start: start,
             neighbors: nbrs,
@@ -184,6 +196,12 @@ impl ReliefGraph {
     #[inline]
     pub fn neighbors_of(&self, i: usize) -> &[u32] {
         &self.neighbors[self.edges(i)]
+    }
+
+    /// True when the adjacency is symmetric (every edge i → j, j ≠ i, has its reverse).
+    #[inline]
+    pub fn is_symmetric(&self) -> bool {
+        self.symmetric
     }
 
     /// Total area, km².

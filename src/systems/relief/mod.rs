@@ -50,7 +50,7 @@ use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 
 use self::diffusion::{DiffusionBudget, DiffusionScratch, diffuse_land, diffuse_land_gpu};
-use self::drainage::{Drainage, sea_mask};
+use self::drainage::{Drainage, SeaMaskScratch, sea_mask_with};
 use self::graph::ReliefGraph;
 use self::isostasy::{AgeDepthLaw, AgeDepthTable, IsostasyParams, RegionalIsostasy, isostasy_cpu};
 use self::sediment::{SedimentBudget, SedimentParams, SedimentRouter};
@@ -195,6 +195,7 @@ pub struct ReliefState {
     spl: StreamPowerScratch,
     diffusion: DiffusionScratch,
     router: SedimentRouter,
+    sea: SeaMaskScratch,
     oceanic: Vec<bool>,
     continental: Vec<bool>,
     fill: Vec<f32>,
@@ -307,12 +308,13 @@ pub fn build_drainage(
         return;
     };
     let mut ocean = std::mem::take(&mut network.drainage.ocean);
-    sea_mask(
+    sea_mask_with(
         g,
         &crust.elevation_km,
         &state.oceanic,
         params.rivers.min_sea_area_km2,
         &mut ocean,
+        &mut state.sea,
     );
     let rain = rain.as_ref().map(|r| &r.0[..]).filter(|r| r.len() == n);
     network
@@ -528,21 +530,28 @@ pub fn deposit_sediment(
     let max_age = params.sediment.pelagic_max_age_my as f32;
     if rate_km > 0.0 {
         let ocean = &network.drainage.ocean;
-        let added: Vec<f64> = crust
+        let (oceanic, age) = (&state.oceanic, &crust.age_my);
+        let rains = |i: usize| oceanic[i] && ocean[i] && age[i] < max_age;
+        crust
             .thickness_km
             .par_iter_mut()
             .enumerate()
             .with_min_len(8192)
-            .map(|(i, t)| {
-                if state.oceanic[i] && ocean[i] && crust.age_my[i] < max_age {
+            .for_each(|(i, t)| {
+                if rains(i) {
                     *t += rate_km as f32;
+                }
+            });
+        // Summed in index order, as before (no per-step buffer).
+        flux.pelagic_km3 = (0..crust.thickness_km.len())
+            .map(|i| {
+                if rains(i) {
                     rate_km * g.area_km2[i]
                 } else {
                     0.0
                 }
             })
-            .collect();
-        flux.pelagic_km3 = added.iter().sum();
+            .sum();
     } else {
         flux.pelagic_km3 = 0.0;
     }

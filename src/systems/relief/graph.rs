@@ -70,9 +70,9 @@ impl ReliefGraph {
         // every pass.
         let mut nbrs: Vec<u32> = neighbors.to_vec();
         for i in 0..n {
-            for e in start[i] as usize..start[i + 1] as usize {
-                if nbrs[e] as usize >= n {
-                    nbrs[e] = i as u32;
+            for nb in &mut nbrs[start[i] as usize..start[i + 1] as usize] {
+                if *nb as usize >= n {
+                    *nb = i as u32;
                 }
             }
         }

@@ -286,7 +286,7 @@ impl SedimentRouter {
         if let Some(mi) = marine_input_km3 {
             let half = 0.5 * g.mean_spacing_km as f32;
             for (j, &v) in mi.iter().enumerate().take(n) {
-                if !(v.is_finite() && v > 0.0) || !ocean[j] {
+                if !(v.is_finite() && v > 0.0 && ocean[j]) {
                     continue;
                 }
                 b.input_km3 += v;
@@ -513,8 +513,8 @@ impl SedimentRouter {
                 if total > 0.0 {
                     let mut given = 0.0;
                     let last = queue.len() - 1;
-                    for k in 0..queue.len() {
-                        let j = queue[k] as usize;
+                    for (k, &j) in queue.iter().enumerate() {
+                        let j = j as usize;
                         let v = if k == last {
                             excess - given
                         } else {

@@ -73,10 +73,7 @@ fn prepare(
     scratch: &mut DiffusionScratch,
 ) -> Option<(u32, f64)> {
     let n = g.len();
-    delta_km
-        .par_iter_mut()
-        .with_min_len(8192)
-        .for_each(|d| *d = 0.0);
+    delta_km.iter_mut().for_each(|d| *d = 0.0);
     if !(kappa_km2_per_my > 0.0 && dt_my > 0.0)
         || elevation_km.len() < n
         || ocean.len() < n
@@ -106,27 +103,20 @@ fn prepare(
     }
     let substeps = ((dt_my * max_rate / 0.5).ceil() as u32).clamp(1, 10_000);
     let dts = dt_my / substeps as f64;
-    // Land samples ascending; the coast: ocean samples with a land neighbour, ascending (both
-    // found in parallel; rayon keeps the order).
     scratch.land.clear();
-    scratch.land.par_extend(
-        (0..n as u32)
-            .into_par_iter()
-            .with_min_len(8192)
-            .filter(|&i| !ocean[i as usize]),
-    );
+    scratch
+        .land
+        .extend((0..n as u32).filter(|&i| !ocean[i as usize]));
     scratch.coast.clear();
-    scratch.coast.par_extend(
-        (0..n as u32)
-            .into_par_iter()
-            .with_min_len(8192)
-            .filter(|&j| {
-                ocean[j as usize]
-                    && g.neighbors_of(j as usize)
-                        .iter()
-                        .any(|&i| !ocean[i as usize])
-            }),
-    );
+    for &i in &scratch.land {
+        for &j in g.neighbors_of(i as usize) {
+            if ocean[j as usize] {
+                scratch.coast.push(j);
+            }
+        }
+    }
+    scratch.coast.sort_unstable();
+    scratch.coast.dedup();
     Some((substeps, dts))
 }
 
@@ -191,18 +181,10 @@ pub fn diffuse_land(
     let kappa = kappa_km2_per_my;
     scratch.h.resize(n, 0.0);
     scratch.next.resize(n, 0.0);
-    scratch
-        .h
-        .par_iter_mut()
-        .zip(elevation_km[..n].par_iter())
-        .zip(ocean[..n].par_iter())
-        .with_min_len(8192)
-        .for_each(|((h, &z), &o)| {
-            if !o {
-                let z = z as f64;
-                *h = if z.is_finite() { z } else { 0.0 };
-            }
-        });
+    for &i in &scratch.land {
+        let z = elevation_km[i as usize] as f64;
+        scratch.h[i as usize] = if z.is_finite() { z } else { 0.0 };
+    }
     scratch.receipts.clear();
     scratch.receipts.resize(scratch.coast.len(), 0.0);
     const CH: usize = 8192;

@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::geometry::SphereMesh;
 use crate::io::maps::MapError;
-use crate::resources::Crust;
+use crate::resources::{Crust, CrustType};
 
 /// Earth's hypsometry (ETOPO1 bedrock, area-weighted).
 #[derive(Clone, Debug, Deserialize)]
@@ -91,6 +91,47 @@ pub struct Hypsometry {
     pub bands: Vec<Band>,
     /// Our elevation quantiles at Earth's levels, m.
     pub quantiles_m: Vec<f64>,
+    /// Correlation (Pearson, area-weighted) of ocean depth with √age over the oceanic crust
+    /// younger than [`AGE_DEPTH_MAX_AGE_MY`]: near 1 where the floor follows a cooling law;
+    /// arcs, sediment fans and trenches lower it. None with too little young floor.
+    #[serde(default)]
+    pub ocean_age_depth_r: Option<f64>,
+}
+
+/// Oldest oceanic crust (My) that [`Hypsometry::ocean_age_depth_r`] and [`age_depth_r`] count.
+pub const AGE_DEPTH_MAX_AGE_MY: f32 = 80.0;
+
+/// Area-weighted Pearson correlation of depth (−elevation) with √age over the oceanic samples of
+/// `crust` younger than [`AGE_DEPTH_MAX_AGE_MY`] with finite age and elevation; None when there
+/// are fewer than 10 such samples or either has no spread.
+pub fn age_depth_r(mesh: &SphereMesh, crust: &Crust) -> Option<f64> {
+    let (mut n, mut sw, mut sx, mut sy, mut sxx, mut syy, mut sxy) =
+        (0usize, 0.0f64, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for i in 0..mesh.len().min(crust.len()) {
+        let (age, z) = (crust.age_my[i], crust.elevation_km[i]);
+        if crust.crust_type[i] != CrustType::Oceanic
+            || !(age >= 0.0 && age < AGE_DEPTH_MAX_AGE_MY)
+            || !z.is_finite()
+        {
+            continue;
+        }
+        let w = mesh.area_km2[i];
+        let (x, y) = ((age as f64).sqrt(), -(z as f64));
+        n += 1;
+        sw += w;
+        sx += w * x;
+        sy += w * y;
+        sxx += w * x * x;
+        syy += w * y * y;
+        sxy += w * x * y;
+    }
+    if n < 10 || !(sw > 0.0) {
+        return None;
+    }
+    let (mx, my) = (sx / sw, sy / sw);
+    let (vx, vy) = (sxx / sw - mx * mx, syy / sw - my * my);
+    let cov = sxy / sw - mx * my;
+    (vx > 1e-12 && vy > 1e-12).then(|| (cov / (vx * vy).sqrt()).clamp(-1.0, 1.0))
 }
 
 impl Hypsometry {
@@ -190,6 +231,7 @@ pub fn hypsometry(mesh: &SphereMesh, crust: &Crust) -> Hypsometry {
         w1_gap_m,
         bands,
         quantiles_m,
+        ocean_age_depth_r: age_depth_r(mesh, crust),
     }
 }
 
@@ -252,4 +294,63 @@ pub fn write_hypsometry_png(h: &Hypsometry, path: &Path, width: u32) -> Result<(
         path: path.to_path_buf(),
         source,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 4,000-sample planet, all oceanic, with ages spread over 0–100 My.
+    fn ocean() -> (SphereMesh, Crust) {
+        let mesh = SphereMesh::fibonacci(4_000, 0.0, 0, 6371.0).expect("mesh");
+        let mut crust = Crust::with_len(mesh.len());
+        for i in 0..mesh.len() {
+            crust.crust_type[i] = CrustType::Oceanic;
+            crust.age_my[i] = ((i * 37) % 100) as f32;
+        }
+        (mesh, crust)
+    }
+
+    #[test]
+    fn floor_on_a_cooling_law_correlates_with_root_age() {
+        let (mesh, mut crust) = ocean();
+        for i in 0..mesh.len() {
+            crust.elevation_km[i] = -(2.6 + 0.365 * crust.age_my[i].sqrt());
+        }
+        let r = age_depth_r(&mesh, &crust).expect("young floor");
+        assert!(r > 0.999, "{r}");
+        // A floor that rises with age instead correlates negatively.
+        for i in 0..mesh.len() {
+            crust.elevation_km[i] = -6.0 + 0.3 * crust.age_my[i].sqrt();
+        }
+        assert!(age_depth_r(&mesh, &crust).unwrap() < -0.999);
+        // Depth unrelated to age: near zero.
+        for i in 0..mesh.len() {
+            crust.elevation_km[i] = -4.0 - ((i * 7919) % 1000) as f32 * 1e-3;
+        }
+        let r = age_depth_r(&mesh, &crust).unwrap();
+        assert!(r.abs() < 0.1, "{r}");
+        // Only young oceanic crust counts: old floor at random depths changes nothing.
+        for i in 0..mesh.len() {
+            let a = crust.age_my[i];
+            crust.elevation_km[i] = if a < AGE_DEPTH_MAX_AGE_MY {
+                -(2.6 + 0.365 * a.sqrt())
+            } else {
+                -(((i * 31) % 9) as f32)
+            };
+        }
+        assert!(age_depth_r(&mesh, &crust).unwrap() > 0.999);
+    }
+
+    #[test]
+    fn no_young_floor_gives_none() {
+        let (mesh, mut crust) = ocean();
+        crust
+            .crust_type
+            .iter_mut()
+            .for_each(|t| *t = CrustType::Continental);
+        assert_eq!(age_depth_r(&mesh, &crust), None);
+        let h = hypsometry(&mesh, &crust);
+        assert_eq!(h.ocean_age_depth_r, None);
+    }
 }

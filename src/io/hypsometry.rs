@@ -110,7 +110,7 @@ pub fn age_depth_r(mesh: &SphereMesh, crust: &Crust) -> Option<f64> {
     for i in 0..mesh.len().min(crust.len()) {
         let (age, z) = (crust.age_my[i], crust.elevation_km[i]);
         if crust.crust_type[i] != CrustType::Oceanic
-            || !(age >= 0.0 && age < AGE_DEPTH_MAX_AGE_MY)
+            || !(0.0..AGE_DEPTH_MAX_AGE_MY).contains(&age)
             || !z.is_finite()
         {
             continue;

@@ -181,6 +181,18 @@ impl Harness {
             .expect("the worker answers in time")
     }
 
+    /// Saves the planet to `file` from the file panel, loads it back, and returns the
+    /// snapshot after the load.
+    fn save_and_load(&mut self, file: &std::path::Path) -> std::sync::Arc<super::worker::Snapshot> {
+        self.app.file_path = file.display().to_string();
+        self.frame(Vec::new());
+        self.click("save");
+        self.settle();
+        self.click("load");
+        self.settle();
+        self.app.snap.clone().unwrap()
+    }
+
     fn finish(self) {
         let Harness { app, .. } = self;
         assert!(app.sim.shutdown(), "the simulation thread ended cleanly");
@@ -924,13 +936,7 @@ fn new_and_loaded_planets_keep_the_viewers_plugins() {
     h.step(1);
     assert_eq!(h.inspect(|sim| sim.world().resource::<Runs>().0), 1);
     // Save and load it back.
-    h.app.file_path = file.display().to_string();
-    h.frame(Vec::new());
-    h.click("save");
-    h.settle();
-    h.click("load");
-    h.settle();
-    let snap = h.app.snap.clone().unwrap();
+    let snap = h.save_and_load(&file);
     assert!(
         snap.log.iter().any(|l| l.starts_with("loaded")),
         "{:?}",
@@ -1044,13 +1050,7 @@ fn a_new_or_loaded_planet_stays_on_the_gpu_backend() {
     assert_eq!(on(&h), crate::gpu::ComputeBackend::Gpu, "new planet");
     h.step(1);
     // Saved and loaded back.
-    h.app.file_path = file.display().to_string();
-    h.frame(Vec::new());
-    h.click("save");
-    h.settle();
-    h.click("load");
-    h.settle();
-    let snap = h.app.snap.clone().unwrap();
+    let snap = h.save_and_load(&file);
     assert!(
         snap.log
             .iter()

@@ -250,7 +250,6 @@ pub fn erode_coasts(
         return;
     };
     let flux = &mut *flux;
-    flux.eroded_km.resize(n, 0.0);
     let mut crust_res = crust;
     let crust = &mut *crust_res;
     let volume = coastal_erosion(

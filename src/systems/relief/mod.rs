@@ -291,12 +291,15 @@ pub fn build_drainage(
     rain: Option<Res<Precipitation>>,
     mut gpu: Option<ResMut<GpuContext>>,
 ) {
+    // The step's flux starts empty here, for every relief system after this one (they run
+    // only with the drainage on, and only on a network built this step).
+    let n = mesh.len();
+    flux.begin_step(n);
+    network.built = false;
     if !pull(&mut crust, &mut gpu, FieldMask::ELEVATION) {
         return;
     }
     let state = &mut *state;
-    let n = mesh.len();
-    flux.begin_step(n);
     state.oceanic.clear();
     state
         .oceanic
@@ -358,12 +361,7 @@ pub fn erode_rivers(
     let spl = stream_power_params(&params);
     let kappa = params.rivers.hillslope_diffusivity_km2_per_my;
     let state = &mut *state;
-    let n = mesh.len();
     let flux = &mut *flux;
-    flux.eroded_km.resize(n, 0.0);
-    flux.diffusion_km.resize(n, 0.0);
-    flux.to_ocean_km3.clear();
-    flux.to_ocean_km3.resize(n, 0.0);
     let Some(g) = state.graph.as_ref() else {
         return;
     };

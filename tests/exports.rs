@@ -9,7 +9,7 @@ use tectonic_planets::amplify::{Amplifier, AmplifyOptions};
 use tectonic_planets::geometry::SphereMesh;
 use tectonic_planets::io::export::{self, ElevationOutputs, GeoGrid};
 use tectonic_planets::io::gltf::{GltfOptions, elevation_colour, planet_glb};
-use tectonic_planets::io::rivers::RiverNetwork;
+use tectonic_planets::io::rivers::{NetworkOptions, RiverNetwork};
 use tectonic_planets::prelude::*;
 
 fn temp_dir(tag: &str) -> PathBuf {
@@ -136,7 +136,14 @@ fn gdal_reads_every_geotiff_with_epsg_4326_and_the_bounds() {
 #[test]
 fn drainage_geotiffs_hold_the_area_and_basins_that_follow_the_receivers() {
     let (mesh, crust) = small_planet();
-    let net = RiverNetwork::of(&mesh, &crust, 250_000.0);
+    let net = RiverNetwork::of(
+        &mesh,
+        &crust,
+        NetworkOptions {
+            min_sea_area_km2: 250_000.0,
+            lake_area_ratio: None,
+        },
+    );
     let d = &net.drainage;
     // Every sample's basin is its receiver's.
     for i in 0..mesh.len() {

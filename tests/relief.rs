@@ -722,9 +722,9 @@ fn network_is_acyclic_and_every_land_sample_reaches_the_sea() {
 /// A land cap of 2000 km sloping to the sea, with a crater at its top: a bowl 1 km deep and
 /// 400 km in radius inside a rim. Seen to fail: the router passing everything on from lake
 /// samples (their capacity ignored).
-#[test]
-fn closed_basin_fills_and_overflows_as_a_lake() {
-    let (mesh, g) = mesh_graph(50_000);
+/// A cone draining to the sea (radius 2,000 km around +x) with a crater 400 km across at its
+/// top, walled by a rim at 550 km: elevation and sea mask.
+fn crater_surface(mesh: &SphereMesh, g: &ReliefGraph) -> (Vec<f32>, Vec<bool>) {
     let mut h = vec![0.0f32; g.len()];
     let mut ocean = vec![false; g.len()];
     for i in 0..g.len() {
@@ -743,6 +743,13 @@ fn closed_basin_fills_and_overflows_as_a_lake() {
         let rim = 0.6 * (-((dx - 550.0) / 100.0).powi(2)).exp();
         h[i] = (base + 0.5 - bowl + rim) as f32;
     }
+    (h, ocean)
+}
+
+#[test]
+fn closed_basin_fills_and_overflows_as_a_lake() {
+    let (mesh, g) = mesh_graph(50_000);
+    let (h, ocean) = crater_surface(mesh, g);
     let mut d = Drainage::new();
     d.compute(g, &h, &ocean, None);
     assert!(d.pit_count >= 1);
@@ -841,6 +848,140 @@ fn closed_basin_fills_and_overflows_as_a_lake() {
             d.water_level_km[i]
         );
     }
+}
+
+/// A lake its catchment cannot keep full (water balance `lake_area_ratio`) shrinks to that
+/// share of its catchment, has no outlet, and keeps all the sediment of its basin; with a
+/// generous balance the same crater overflows as before. Seen to fail with the balance step
+/// skipped (the lake stays at its spill point, 0.6 of its catchment) and with the closed lake's
+/// outlet left in place (the crater drains to the sea).
+#[test]
+fn closed_lake_shrinks_to_its_water_balance_and_keeps_its_sediment() {
+    let (mesh, g) = mesh_graph(50_000);
+    let (h, ocean) = crater_surface(mesh, g);
+    let centre = nearest(mesh, DVec3::X);
+    let in_crater = |i: usize| dist_from_x(mesh.positions[i]) < 700.0;
+    let lake_area = |d: &Drainage| -> f64 {
+        (0..g.len())
+            .filter(|&i| in_crater(i) && d.is_lake(i))
+            .map(|i| g.area_km2[i])
+            .sum()
+    };
+    // Open: the balance allows more lake than the crater holds.
+    let mut open = Drainage::new();
+    open.lake_area_ratio = Some(0.9);
+    open.compute(g, &h, &ocean, None);
+    assert_eq!(open.closed_lake_count(), 0);
+    let spill_level = open.water_level_km[centre];
+    let spill_area = lake_area(&open);
+    // The catchment: the drainage area at the lake's outlet (its largest).
+    let catchment = (0..g.len())
+        .filter(|&i| in_crater(i) && open.is_lake(i))
+        .map(|i| open.area_km2[i])
+        .fold(0.0, f64::max);
+    assert!(
+        spill_area > 0.4 * catchment,
+        "the full crater lake covers {spill_area} km² of a {catchment} km² catchment"
+    );
+    // Closed: at most 20% of the catchment can be kept wet.
+    let ratio = 0.2;
+    let mut d = Drainage::new();
+    d.lake_area_ratio = Some(ratio);
+    d.compute(g, &h, &ocean, None);
+    assert!(d.closed_lake_count() >= 1, "no closed lake");
+    // Every land sample ends in the sea or in a sink, without a cycle.
+    let end = |i: usize| -> usize {
+        let mut j = i;
+        for _ in 0..g.len() {
+            let r = d.receiver[j] as usize;
+            if r == j {
+                return j;
+            }
+            j = r;
+        }
+        panic!("cycle through sample {i}");
+    };
+    let sink = end(centre);
+    assert!(!ocean[sink], "the crater drains to the sea");
+    assert!(d.sinks.contains(&(sink as u32)));
+    let members = d.closed_lake_samples(sink).expect("the sink's lake");
+    assert!(members.contains(&(centre as u32)));
+    let basin: Vec<usize> = (0..g.len())
+        .filter(|&i| !ocean[i] && end(i) == sink)
+        .collect();
+    let basin_area: f64 = basin.iter().map(|&i| g.area_km2[i]).sum();
+    // The basin is the open lake's catchment, less the small pits on its slopes that closed
+    // on their own.
+    assert!(
+        basin_area > 0.85 * catchment && basin_area < 1.001 * catchment,
+        "closed basin {basin_area} km², the open lake's catchment {catchment} km²"
+    );
+    assert!(
+        (d.area_km2[sink] - basin_area).abs() < 1e-6 * basin_area,
+        "drainage area at the sink {} km², basin {basin_area} km²",
+        d.area_km2[sink]
+    );
+    let area: f64 = members.iter().map(|&i| g.area_km2[i as usize]).sum();
+    let max_sample = basin.iter().map(|&i| g.area_km2[i]).fold(0.0, f64::max);
+    assert!(
+        area <= ratio * basin_area + max_sample && area >= ratio * basin_area - 3.0 * max_sample,
+        "closed lake {area} km², balance {} km²",
+        ratio * basin_area
+    );
+    let level = d.water_level_km[centre];
+    assert!(
+        level < spill_level - 0.1,
+        "closed lake level {level} km, spill level {spill_level} km"
+    );
+    // Outside the crater, water still reaches the sea.
+    for i in 0..g.len() {
+        if !ocean[i] && dist_from_x(mesh.positions[i]) > 800.0 {
+            assert!(
+                ocean[end(i)],
+                "sample {i} outside the crater lost its way to the sea"
+            );
+        }
+    }
+    // Sediment: three times the lake's volume, eroded evenly over the basin, stays in the basin.
+    let capacity: f64 = members
+        .iter()
+        .map(|&i| d.lake_depth_km(i as usize) as f64 * g.area_km2[i as usize])
+        .sum();
+    let mut eroded = vec![0.0f32; g.len()];
+    for &i in &basin {
+        eroded[i] = (3.0 * capacity / basin_area) as f32;
+    }
+    let input: f64 = basin
+        .iter()
+        .map(|&i| eroded[i] as f64 * g.area_km2[i])
+        .sum();
+    let mut dep = vec![0.0f32; g.len()];
+    let b = SedimentRouter::new().route(
+        g,
+        &d,
+        &h,
+        &eroded,
+        None,
+        None,
+        &SedimentParams::default(),
+        &mut dep,
+    );
+    let kept: f64 = basin.iter().map(|&i| dep[i] as f64 * g.area_km2[i]).sum();
+    assert!(
+        (kept - input).abs() < 1e-6 * input,
+        "the basin kept {kept} km³ of {input} km³"
+    );
+    assert!(
+        b.relative_error() < 1e-6,
+        "router error {}",
+        b.relative_error()
+    );
+    // What the lake floor could not take settled over the whole lake, not on one sample.
+    let on_sink = dep[sink] as f64 * g.area_km2[sink];
+    assert!(
+        on_sink < 0.2 * input,
+        "the sink took {on_sink} km³ of {input} km³"
+    );
 }
 
 /// Seen to fail: the flood leaving samples with no route to the sea unvisited instead of

@@ -9,7 +9,7 @@ use std::sync::OnceLock;
 
 use tectonic_planets::geometry::SphereMesh;
 use tectonic_planets::io::maps::Raster;
-use tectonic_planets::io::rivers::{self, RiverNetwork};
+use tectonic_planets::io::rivers::{self, NetworkOptions, RiverNetwork};
 use tectonic_planets::io::summary::CrustSampler;
 use tectonic_planets::prelude::*;
 
@@ -26,7 +26,7 @@ fn planet() -> &'static (SphereMesh, Crust, RiverNetwork) {
         }
         let crust = sim.resampled_crust();
         let mesh = sim.mesh().clone();
-        let net = RiverNetwork::of(&mesh, &crust, sim.params().rivers.min_sea_area_km2);
+        let net = RiverNetwork::of(&mesh, &crust, NetworkOptions::of(sim.params()));
         (mesh, crust, net)
     })
 }

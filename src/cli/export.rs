@@ -8,6 +8,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use tectonic_planets::Simulation;
 use tectonic_planets::gpu::{BackendChoice, GpuContext};
+use tectonic_planets::io::rivers::NetworkOptions;
 use tectonic_planets::io::save::{self};
 
 use super::*;
@@ -299,7 +300,7 @@ pub(crate) fn write_extra_exports_on(
     };
     let radius_km = sim.params().planet.radius_km;
     let seed = sim.params().planet.seed;
-    let min_sea_area_km2 = sim.params().rivers.min_sea_area_km2;
+    let network_opts = NetworkOptions::of(sim.params());
     let view = sim.resampled_crust();
     let mesh = sim.mesh();
     let mut files = Vec::new();
@@ -310,7 +311,7 @@ pub(crate) fn write_extra_exports_on(
         )?);
         say(&format!("crust GeoTIFFs {}x{}", grid.width, grid.height), t);
         let t = Instant::now();
-        let rivers = RiverNetwork::of(mesh, &view, min_sea_area_km2);
+        let rivers = RiverNetwork::of(mesh, &view, network_opts);
         files.extend(export::export_drainage_layers(
             mesh, &rivers, &grid, out, prefix,
         )?);

@@ -20,6 +20,7 @@ use crate::io::maps::{MapError, Raster};
 use crate::resources::Crust;
 use crate::systems::relief::drainage::Drainage;
 use crate::systems::relief::graph::ReliefGraph;
+pub use crate::systems::relief::network::NetworkOptions;
 use crate::systems::relief::network::{
     Reach, basin_outlets, network_of, relief_graph, river_reaches, river_threshold_km2,
 };
@@ -53,15 +54,15 @@ pub struct RiverNetwork {
 
 impl RiverNetwork {
     /// The network of `crust` on `mesh` (give the resampled crust: world frame), with the sea
-    /// as in the simulation (`min_sea_area_km2`: parameter `rivers.min_sea_area_km2`) and the
-    /// threshold of [`river_threshold_km2`].
-    pub fn of(mesh: &SphereMesh, crust: &Crust, min_sea_area_km2: f64) -> Self {
-        Self::on_graph(&relief_graph(mesh), crust, min_sea_area_km2)
+    /// and lakes as in the simulation (`opts`: [`NetworkOptions::of`] the run's parameters) and
+    /// the threshold of [`river_threshold_km2`].
+    pub fn of(mesh: &SphereMesh, crust: &Crust, opts: NetworkOptions) -> Self {
+        Self::on_graph(&relief_graph(mesh), crust, opts)
     }
 
     /// [`Self::of`] on a sample graph already built (see [`relief_graph`]).
-    pub fn on_graph(g: &ReliefGraph, crust: &Crust, min_sea_area_km2: f64) -> Self {
-        let drainage = network_of(g, crust, min_sea_area_km2);
+    pub fn on_graph(g: &ReliefGraph, crust: &Crust, opts: NetworkOptions) -> Self {
+        let drainage = network_of(g, crust, opts);
         let min_area_km2 = river_threshold_km2(g.total_area_km2(), g.len());
         let reaches = river_reaches(&drainage, min_area_km2);
         let outlets = basin_outlets(&drainage);
@@ -88,12 +89,88 @@ impl RiverNetwork {
         i < self.len() && self.drainage.ocean.len() == self.len() && self.drainage.is_lake(i)
     }
 
+    /// Lakes and basins in figures, for `summary.json` (`mesh`: the mesh of the network).
+    pub fn summary(&self, mesh: &SphereMesh) -> DrainageSummary {
+        let n = self.len();
+        let mut s = DrainageSummary {
+            closed_lakes: self.drainage.closed_lake_count(),
+            ..Default::default()
+        };
+        if n == 0 || mesh.len() != n || self.outlets.len() != n {
+            return s;
+        }
+        let d = &self.drainage;
+        let (mut land, mut lake, mut drawn, mut endorheic) = (0.0, 0.0, 0.0, 0.0);
+        for i in 0..n {
+            if d.ocean[i] {
+                continue;
+            }
+            let a = mesh.area_km2[i];
+            land += a;
+            if self.is_lake(i) {
+                lake += a;
+            }
+            if self.is_drawn_lake(i) {
+                drawn += a;
+            }
+            if !d.ocean[self.outlets[i] as usize] {
+                endorheic += a;
+            }
+        }
+        // The largest lake: connected lake samples.
+        let mut seen = vec![false; n];
+        let mut queue = Vec::new();
+        for start in 0..n {
+            if seen[start] || !self.is_lake(start) {
+                continue;
+            }
+            seen[start] = true;
+            queue.clear();
+            queue.push(start);
+            let (mut head, mut area) = (0, 0.0);
+            while head < queue.len() {
+                let i = queue[head];
+                head += 1;
+                area += mesh.area_km2[i];
+                for &j in mesh.neighbors_of(i) {
+                    let j = j as usize;
+                    if !seen[j] && self.is_lake(j) {
+                        seen[j] = true;
+                        queue.push(j);
+                    }
+                }
+            }
+            s.largest_lake_km2 = s.largest_lake_km2.max(area);
+        }
+        if land > 0.0 {
+            s.lake_share_of_land = lake / land;
+            s.drawn_lake_share_of_land = drawn / land;
+            s.endorheic_share_of_land = endorheic / land;
+        }
+        s
+    }
+
     /// Whether sample `i` is under a lake at least [`MIN_DRAWN_LAKE_DEPTH_KM`] deep: what
     /// `rivers.png` draws as water (the shallow rims and the pans a few metres deep that dot a
     /// flat plain are drawn as land).
     pub fn is_drawn_lake(&self, i: usize) -> bool {
         self.is_lake(i) && self.drainage.lake_depth_km(i) >= MIN_DRAWN_LAKE_DEPTH_KM
     }
+}
+
+/// Lakes and basins of a drainage network (the `drainage` block of `summary.json`).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DrainageSummary {
+    /// Share of the land area under lakes (any depth).
+    pub lake_share_of_land: f64,
+    /// Share of the land area under lakes at least 20 m deep (what `rivers.png` draws).
+    pub drawn_lake_share_of_land: f64,
+    /// Share of the land area that drains to no sea (closed lakes and sinks).
+    pub endorheic_share_of_land: f64,
+    /// Lakes with no outlet: their catchment's runoff cannot keep them full.
+    pub closed_lakes: usize,
+    /// Area of the largest lake, km².
+    pub largest_lake_km2: f64,
 }
 
 /// Shallowest water `rivers.png` draws as a lake, km (20 m).

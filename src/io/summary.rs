@@ -49,6 +49,10 @@ pub struct Summary {
     pub resamplings: u64,
     /// The relief against Earth's: bands, means, the ocean mode, the W1 gap.
     pub hypsometry: crate::io::hypsometry::Hypsometry,
+    /// Lakes and basins of the final surface (written by `generate`; absent from summaries
+    /// made without a drainage network).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drainage: Option<crate::io::rivers::DrainageSummary>,
 }
 
 /// Area-weighted elevation percentiles of a crust, metres.
@@ -105,6 +109,7 @@ pub fn summarize(sim: &Simulation, view: &Crust) -> Summary {
         timings_ms,
         resamplings: sim.clock().resamplings,
         hypsometry: crate::io::hypsometry::hypsometry(mesh, view),
+        drainage: None,
     }
 }
 

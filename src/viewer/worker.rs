@@ -18,7 +18,7 @@ use crate::geometry::SphereMesh;
 use crate::geometry::spherical::to_lat_lon_deg;
 use crate::gpu::{BackendChoice, ComputeBackend};
 use crate::io::maps::{Raster, write_all_maps};
-use crate::io::rivers::{RiverNetwork, write_rivers};
+use crate::io::rivers::{NetworkOptions, RiverNetwork, write_rivers};
 use crate::io::save::{self, CommandHistory};
 use crate::io::summary::CrustSampler;
 use crate::plugins::PhenomenonInfo;
@@ -285,11 +285,7 @@ impl Snapshot {
     /// time it is asked for (by whoever draws a layer that needs it).
     pub fn rivers(&self) -> &RiverNetwork {
         self.rivers.get_or_init(|| {
-            RiverNetwork::on_graph(
-                &self.graph,
-                &self.crust,
-                self.params.rivers.min_sea_area_km2,
-            )
+            RiverNetwork::on_graph(&self.graph, &self.crust, NetworkOptions::of(&self.params))
         })
     }
 }
@@ -721,8 +717,8 @@ impl Worker {
                     let radius_km = self.sim.params().planet.radius_km;
                     let mut files =
                         write_all_maps(&raster, &dir, radius_km).map_err(|e| e.to_string())?;
-                    let min_sea = self.sim.params().rivers.min_sea_area_km2;
-                    let rivers = RiverNetwork::on_graph(&self.graph, &view, min_sea);
+                    let opts = NetworkOptions::of(self.sim.params());
+                    let rivers = RiverNetwork::on_graph(&self.graph, &view, opts);
                     files.extend(
                         write_rivers(&raster, self.sim.mesh(), &rivers, &dir, radius_km)
                             .map_err(|e| e.to_string())?,

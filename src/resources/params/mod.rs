@@ -285,6 +285,8 @@ define_params! {
         min_sea_area_km2: f64 = 250000.0, 0.0..=1e9, "km²", "A body of water below sea level smaller than this, or without oceanic crust, is a lake: it fills with sediment and overflows toward the sea instead of taking the sediment of the land around it (the Caspian is 370,000 km²).";
         denudation_per_my: f64 = 0.05, 0.0..=10.0, "1/My", "Background denudation: land loses this fraction of its height above sea level per My, up to denudation_cap_km (weathering and transport below the resolution of the network, which stream power with its threshold leaves out), carried down the network as sediment. 0.05/My is 0.05 mm/yr at 1 km, within the rates of old orogens and cratons (0.01–0.1 mm/yr, Portenga & Bierman 2011); with isostatic rebound, a plain left alone sinks toward sea level over about 130 My.";
         denudation_cap_km: f64 = 1.0, 0.0..=20.0, "km", "Background denudation grows with height up to this elevation and no further: ranges are worn by rivers (stream power), lowlands by denudation.";
+        runoff_mm_per_yr: f64 = 300.0, 0.0..=10000.0, "mm/yr", "Runoff over the land (rain less evapotranspiration; Earth's mean is about 300 mm/yr: Fekete, Vörösmarty & Grabs 2002), scaled by the precipitation field where a plugin sets one. With lake_net_evaporation_mm_per_yr it sets how much lake a closed depression keeps.";
+        lake_net_evaporation_mm_per_yr: f64 = 1000.0, 0.0..=10000.0, "mm/yr", "Evaporation from a lake surface less the rain on it (about 1 m/yr for the Caspian, the Great Salt Lake and the Dead Sea). A lake larger than runoff / this × its catchment cannot be kept full: it shrinks to that area, holds no outlet, and its basin drains into it (an endorheic basin). 0: every depression fills to its spill point and overflows.";
     }
     /// Coasts: waves cut back coasts that face open water and leave a platform below sea level,
     /// which sediment builds into a shelf.
@@ -935,7 +937,7 @@ mod tests {
     #[test]
     fn schema_is_consistent() {
         let schema = Params::schema();
-        assert_eq!(schema.len(), 86);
+        assert_eq!(schema.len(), 88);
         assert_eq!(schema.len(), BOUNDS.len());
         let mut seen = HashSet::new();
         for (spec, (lo, hi)) in schema.iter().zip(BOUNDS) {

@@ -28,8 +28,17 @@
 //! 4. Drainage area A_i = Σ_upstream a_j·p_j (km²; p relative precipitation, 1 by default),
 //!    accumulated in reverse stack order.
 //!
+//! 5. Water balance (when [`Drainage::lake_area_ratio`] is set): a lake keeps at most
+//!    ratio × its catchment of area (runoff over net evaporation: a closed lake stands where
+//!    the inflow of its catchment equals the net evaporation from its surface). Outlets are visited upstream first; a lake over
+//!    its balance is *closed*: its catchment is taken off everything below its outlet, its
+//!    basin (everything draining through the outlet) is flooded again from its lowest sample,
+//!    which becomes a sink, and the lake is the first samples of that flood up to the balance
+//!    area, at the level of the last of them. Stack and areas are then rebuilt.
+//!
 //! A land region with no route to any ocean sample (e.g. a planet without sea) drains to its
-//! lowest sample, which becomes an endorheic sink (receiver = itself, recorded in `sinks`).
+//! lowest sample, which becomes an endorheic sink (receiver = itself, recorded in `sinks`), as
+//! does the low point of a closed lake.
 //!
 //! Cost: O(n) for receivers, stack and areas, plus O(k log k) for the k samples in pit basins.
 //! Deterministic: ties go to the lowest neighbour position in the CSR list, the flood breaks
@@ -61,7 +70,8 @@ pub struct Drainage {
     pub water_level_km: Vec<f32>,
     /// True for ocean samples (copy of the mask used).
     pub ocean: Vec<bool>,
-    /// Endorheic sinks: land samples without any route to the sea (their receiver is themselves).
+    /// Endorheic sinks: land samples without any route to the sea, and the low points of closed
+    /// lakes (their receiver is themselves). Sorted.
     pub sinks: Vec<u32>,
     /// Number of pits found before flooding (land samples with no lower neighbour).
     pub pit_count: usize,
@@ -72,6 +82,16 @@ pub struct Drainage {
     /// Wall time of the sub-passes of the last call, ms: receivers, pit basins, flood, stack,
     /// areas.
     pub timings_ms: [f64; 5],
+    /// Water balance of closed depressions: the largest lake area a catchment keeps, per km² of
+    /// (precipitation-weighted) catchment, i.e. runoff / net evaporation from the lake surface.
+    /// A lake whose area at its spill point exceeds this share of its catchment is *closed*:
+    /// it shrinks until it does not (its level falls), no water leaves it, and its basin drains
+    /// to its lowest sample (a sink). `None`: every depression fills to its spill point.
+    pub lake_area_ratio: Option<f64>,
+    /// Closed lakes of the last call: (sink, start, end) into `closed_members`, by sink.
+    closed: Vec<(u32, u32, u32)>,
+    /// Lake samples of the closed lakes (see `closed`).
+    closed_members: Vec<u32>,
     // Scratch.
     h: Vec<f32>,
     donor_start: Vec<u32>,
@@ -87,12 +107,18 @@ pub struct Drainage {
     fill: Vec<u32>,
     heap: RadixHeap,
     pit_queue: VecDeque<u32>,
+    lake_acc: Vec<f64>,
+    closing: Vec<(u32, f64)>,
+    basin: Vec<u32>,
+    order: Vec<u32>,
 }
 
 const IN_REGION: u8 = 1;
 const DONE: u8 = 2;
 const TO_SEA: u8 = 3;
 const SEED: u8 = 4;
+const BASIN: u8 = 5;
+const CLOSED: u8 = 6;
 
 /// Key that orders f32 values totally (as `f32::total_cmp`) when compared as u32.
 #[inline]
@@ -198,6 +224,22 @@ impl Drainage {
         }
     }
 
+    /// The lake samples of the closed lake whose sink is `sink` (see
+    /// [`Drainage::lake_area_ratio`]); `None` when `sink` is not the sink of a closed lake.
+    pub fn closed_lake_samples(&self, sink: usize) -> Option<&[u32]> {
+        let k = self
+            .closed
+            .binary_search_by_key(&(sink as u32), |c| c.0)
+            .ok()?;
+        let (_, a, b) = self.closed[k];
+        Some(&self.closed_members[a as usize..b as usize])
+    }
+
+    /// Number of closed lakes in the last computation (see [`Drainage::lake_area_ratio`]).
+    pub fn closed_lake_count(&self) -> usize {
+        self.closed.len()
+    }
+
     /// Donors (upstream neighbours draining into `i`) from the last computation.
     #[inline]
     pub fn donors_of(&self, i: usize) -> &[u32] {
@@ -235,6 +277,8 @@ impl Drainage {
         self.mark.resize(n, 0);
         self.parent.resize(n, u32::MAX);
         self.sinks.clear();
+        self.closed.clear();
+        self.closed_members.clear();
 
         // Sanitised inputs: routing height (ocean at sea level) and mask.
         const CH: usize = 8192;
@@ -384,7 +428,29 @@ impl Drainage {
         self.seeds.clear();
         self.timings_ms[2] = lap();
 
-        // 3. Donor lists (CSR, in sample order) and the stack.
+        // 3–4. Donor lists, stack and drainage areas.
+        self.stack_and_areas(g, precipitation, &mut lap);
+
+        // 5. Water balance: a lake whose catchment cannot keep it full to its spill point
+        //    shrinks to the area its inflow can feed and no longer overflows.
+        if let Some(ratio) = self.lake_area_ratio
+            && self.lake_sample_count > 0
+            && self.balance_lakes(g, ratio)
+        {
+            self.stack_and_areas(g, precipitation, &mut lap);
+        }
+    }
+
+    /// Donor lists (CSR, in sample order), the stack (breadth-first from the outlets) and the
+    /// drainage areas (reverse stack order, sequential f64), from the receivers.
+    fn stack_and_areas(
+        &mut self,
+        g: &ReliefGraph,
+        precipitation: Option<&[f32]>,
+        lap: &mut impl FnMut() -> f64,
+    ) {
+        let n = g.len();
+        // Donor lists and the stack.
         self.donor_start.clear();
         self.donor_start.resize(n + 1, 0);
         for &i in &self.land {
@@ -441,6 +507,199 @@ impl Drainage {
             }
         }
         self.timings_ms[4] = lap();
+    }
+
+    /// Step 5 of [`Self::compute`]: closes the lakes whose catchment cannot keep them full
+    /// (lake area at the spill point > `ratio` × catchment area), upstream first, so that a
+    /// closed lake's catchment no longer counts for the lakes below it. True when a lake
+    /// closed (the receivers changed: the stack and the areas must be rebuilt).
+    fn balance_lakes(&mut self, g: &ReliefGraph, ratio: f64) -> bool {
+        let n = g.len();
+        self.lake_acc.clear();
+        self.lake_acc.resize(n, 0.0);
+        self.closing.clear();
+        for k in (0..self.stack.len()).rev() {
+            let i = self.stack[k] as usize;
+            if !self.is_lake(i) {
+                continue;
+            }
+            self.lake_acc[i] += g.area_km2[i];
+            let r = self.receiver[i] as usize;
+            if r == i {
+                continue; // an endorheic sink: nothing leaves it already
+            }
+            if self.is_lake(r) {
+                self.lake_acc[r] += self.lake_acc[i];
+                continue;
+            }
+            // `i` is the outlet of a lake (or of the part of a lake behind an island).
+            let catchment = self.area_km2[i];
+            if self.lake_acc[i] <= ratio * catchment {
+                continue;
+            }
+            self.closing.push((i as u32, catchment));
+            let mut j = r;
+            loop {
+                self.area_km2[j] -= catchment;
+                let rj = self.receiver[j] as usize;
+                if rj == j {
+                    break;
+                }
+                j = rj;
+            }
+        }
+        if self.closing.is_empty() {
+            return false;
+        }
+        for c in 0..self.closing.len() {
+            let (o, catchment) = self.closing[c];
+            self.close_lake(g, o as usize, ratio * catchment);
+        }
+        // Marks back to 0 (every closed basin lies in the pit-basin region).
+        for &i in &self.region {
+            self.mark[i as usize] = 0;
+        }
+        self.sinks.sort_unstable();
+        self.closed.sort_unstable_by_key(|c| c.0);
+        self.lake_sample_count = self
+            .region
+            .iter()
+            .filter(|&&i| self.water_level_km[i as usize] > self.h[i as usize])
+            .count();
+        true
+    }
+
+    /// Closes the lake whose outlet is `o`: its basin (every sample draining through `o`, not
+    /// already in a closed basin) is flooded again from its lowest sample, which becomes a sink;
+    /// the lake is the first samples of that flood up to `target_km2` of area, at the level of
+    /// the last of them. Lake samples drain to the sample that flooded them; the others keep
+    /// their receiver where it is still lower on the new water surface, else take the steepest
+    /// descent on it within the basin.
+    fn close_lake(&mut self, g: &ReliefGraph, o: usize, target_km2: f64) {
+        // The basin: the subtree of the outlet.
+        self.basin.clear();
+        self.basin.push(o as u32);
+        self.mark[o] = BASIN;
+        let mut head = 0;
+        while head < self.basin.len() {
+            let i = self.basin[head] as usize;
+            head += 1;
+            let (a, b) = (
+                self.donor_start[i] as usize,
+                self.donor_start[i + 1] as usize,
+            );
+            for k in a..b {
+                let d = self.donors[k] as usize;
+                if self.mark[d] == 0 {
+                    self.mark[d] = BASIN;
+                    self.basin.push(d as u32);
+                }
+            }
+        }
+        let mut s = o;
+        for &i in &self.basin {
+            let i = i as usize;
+            if self.h[i] < self.h[s] || (self.h[i] == self.h[s] && i < s) {
+                s = i;
+            }
+        }
+        // Priority-Flood+ε within the basin from its lowest sample.
+        let hs = self.h[s];
+        self.heap.clear();
+        self.pit_queue.clear();
+        self.heap.reset_floor(order_bits(hs));
+        self.mark[s] = CLOSED;
+        self.parent[s] = u32::MAX;
+        self.water_level_km[s] = hs;
+        self.heap.push(order_bits(hs), s as u32);
+        self.order.clear();
+        let (mut lake_area, mut level, mut lake_n) = (0.0f64, hs, 0usize);
+        loop {
+            let (c, lc) = if let Some(c) = self.pit_queue.pop_front() {
+                (c as usize, self.water_level_km[c as usize])
+            } else if let Some((k, c)) = self.heap.pop() {
+                (c as usize, level_of_bits(k))
+            } else {
+                break;
+            };
+            self.order.push(c as u32);
+            if lake_area < target_km2 {
+                lake_area += g.area_km2[c];
+                level = lc;
+                lake_n = self.order.len();
+            }
+            for e in g.edges(c) {
+                let j = g.neighbors[e] as usize;
+                if self.mark[j] != BASIN {
+                    continue;
+                }
+                self.mark[j] = CLOSED;
+                self.parent[j] = c as u32;
+                let hj = self.h[j];
+                let up = lc.next_up();
+                if hj <= up {
+                    self.water_level_km[j] = up.max(hj);
+                    self.pit_queue.push_back(j as u32);
+                } else {
+                    self.water_level_km[j] = hj;
+                    self.heap.push(order_bits(hj), j as u32);
+                }
+            }
+        }
+        // The lake: the first `lake_n` samples, at `level`.
+        let start = self.closed_members.len() as u32;
+        for k in 0..lake_n {
+            let i = self.order[k] as usize;
+            self.water_level_km[i] = level.max(self.h[i]);
+            if self.water_level_km[i] > self.h[i] {
+                self.closed_members.push(i as u32);
+            }
+        }
+        self.closed
+            .push((s as u32, start, self.closed_members.len() as u32));
+        self.sinks.push(s as u32);
+        // Receivers.
+        let edge_to = |g: &ReliefGraph, i: usize, j: u32| -> f32 {
+            g.edges(i)
+                .find(|&e| g.neighbors[e] == j)
+                .map(|e| g.edge_km[e])
+                .unwrap_or(0.0)
+        };
+        for k in 0..self.order.len() {
+            let i = self.order[k] as usize;
+            if i == s {
+                self.receiver[i] = i as u32;
+                self.receiver_km[i] = 0.0;
+                continue;
+            }
+            let li = self.water_level_km[i];
+            let pa = self.parent[i];
+            if k < lake_n || li > self.h[i] {
+                self.receiver[i] = pa;
+                self.receiver_km[i] = edge_to(g, i, pa);
+                continue;
+            }
+            let r0 = self.receiver[i] as usize;
+            if self.mark[r0] == CLOSED && self.water_level_km[r0] < li && r0 != i {
+                continue;
+            }
+            let (mut r, mut d, mut best) = (pa, edge_to(g, i, pa), 0.0f32);
+            for e in g.edges(i) {
+                let j = g.neighbors[e] as usize;
+                let dist = g.edge_km[e];
+                if dist <= 0.0 || self.mark[j] != CLOSED {
+                    continue;
+                }
+                let sl = (li - self.water_level_km[j]) / dist;
+                if sl > best {
+                    best = sl;
+                    r = j as u32;
+                    d = dist;
+                }
+            }
+            self.receiver[i] = r;
+            self.receiver_km[i] = d;
+        }
     }
 
     /// Marks every land sample whose receiver chain ends in a pit (mark = epoch) and lists them

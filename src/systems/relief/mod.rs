@@ -279,6 +279,14 @@ fn after_write(
     }
 }
 
+/// The water balance of closed lakes from the parameters: runoff over net lake evaporation
+/// (see [`Drainage::lake_area_ratio`]); `None` when the evaporation is 0 (lakes always fill).
+pub fn lake_area_ratio(params: &Params) -> Option<f64> {
+    let r = &params.rivers;
+    (r.lake_net_evaporation_mm_per_yr > 0.0)
+        .then(|| r.runoff_mm_per_yr / r.lake_net_evaporation_mm_per_yr)
+}
+
 /// Builds the drainage network of the current surface (phenomenon `drainage`).
 #[allow(clippy::too_many_arguments)]
 pub fn build_drainage(
@@ -320,6 +328,7 @@ pub fn build_drainage(
         &mut state.sea,
     );
     let rain = rain.as_ref().map(|r| &r.0[..]).filter(|r| r.len() == n);
+    network.drainage.lake_area_ratio = lake_area_ratio(&params);
     network
         .drainage
         .compute(g, &crust.elevation_km, &ocean, rain);

@@ -53,10 +53,29 @@ pub fn relief_graph(mesh: &SphereMesh) -> ReliefGraph {
     )
 }
 
+/// What decides the sea and the lakes of a drainage network, as in the simulation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NetworkOptions {
+    /// Smallest body of water that is sea (parameter `rivers.min_sea_area_km2`).
+    pub min_sea_area_km2: f64,
+    /// Water balance of closed lakes (see [`Drainage::lake_area_ratio`]).
+    pub lake_area_ratio: Option<f64>,
+}
+
+impl NetworkOptions {
+    /// The options the simulation uses with `params`.
+    pub fn of(params: &crate::resources::Params) -> Self {
+        Self {
+            min_sea_area_km2: params.rivers.min_sea_area_km2,
+            lake_area_ratio: super::lake_area_ratio(params),
+        }
+    }
+}
+
 /// The drainage network of `crust` on graph `g` (uniform rain): the sea is the oceanic bodies of
-/// water of at least `min_sea_area_km2` (parameter `rivers.min_sea_area_km2`), as in the
+/// water of at least `opts.min_sea_area_km2`, the lakes balanced as `opts` says, as in the
 /// simulation. Give it the resampled crust (world frame, reference mesh) to map it.
-pub fn network_of(g: &ReliefGraph, crust: &Crust, min_sea_area_km2: f64) -> Drainage {
+pub fn network_of(g: &ReliefGraph, crust: &Crust, opts: NetworkOptions) -> Drainage {
     let oceanic: Vec<bool> = crust
         .crust_type
         .iter()
@@ -67,10 +86,11 @@ pub fn network_of(g: &ReliefGraph, crust: &Crust, min_sea_area_km2: f64) -> Drai
         g,
         &crust.elevation_km,
         &oceanic,
-        min_sea_area_km2,
+        opts.min_sea_area_km2,
         &mut ocean,
     );
     let mut d = Drainage::new();
+    d.lake_area_ratio = opts.lake_area_ratio;
     d.compute(g, &crust.elevation_km, &ocean, None);
     d
 }
@@ -288,7 +308,14 @@ mod tests {
     fn basins_follow_receivers_and_reaches_chain_to_the_sea() {
         let (mesh, crust) = planet();
         let g = relief_graph(&mesh);
-        let d = network_of(&g, &crust, 250_000.0);
+        let d = network_of(
+            &g,
+            &crust,
+            NetworkOptions {
+                min_sea_area_km2: 250_000.0,
+                lake_area_ratio: None,
+            },
+        );
         let outlets = basin_outlets(&d);
         for i in 0..mesh.len() {
             let r = d.receiver[i] as usize;

@@ -255,6 +255,32 @@ impl SedimentRouter {
             } else {
                 0.0
             };
+            if r == i
+                && let Some(lake) = drainage.closed_lake_samples(i)
+                && !lake.is_empty()
+            {
+                // The sink of a closed lake: what the lake floor upstream did not keep settles
+                // over the whole lake, in proportion to area (the basin fills from its floor).
+                let total: f64 = lake.iter().map(|&j| g.area_km2[j as usize]).sum();
+                if total > 0.0 {
+                    let mut given = 0.0;
+                    for (k, &j) in lake.iter().enumerate() {
+                        let j = j as usize;
+                        let v = if k + 1 == lake.len() {
+                            q - given
+                        } else {
+                            q * g.area_km2[j] / total
+                        };
+                        given += v;
+                        if self.dep[j] == 0.0 && v > 0.0 {
+                            self.touched.push(j as u32);
+                        }
+                        self.dep[j] += v;
+                    }
+                    b.lakes_km3 += q;
+                    continue;
+                }
+            }
             if depth > 0.0 || r == i {
                 let cap = if r == i {
                     f64::INFINITY

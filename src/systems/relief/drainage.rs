@@ -111,6 +111,8 @@ pub struct Drainage {
     closing: Vec<(u32, f64)>,
     basin: Vec<u32>,
     order: Vec<u32>,
+    pos: Vec<u32>,
+    slots: Vec<u32>,
 }
 
 const IN_REGION: u8 = 1;
@@ -119,6 +121,17 @@ const TO_SEA: u8 = 3;
 const SEED: u8 = 4;
 const BASIN: u8 = 5;
 const CLOSED: u8 = 6;
+
+/// Relative precipitation at sample `i` (1 without a field or where it is not finite; never
+/// negative).
+#[inline]
+fn rain_at(precipitation: Option<&[f32]>, i: usize) -> f64 {
+    precipitation
+        .and_then(|p| p.get(i).copied())
+        .filter(|p| p.is_finite())
+        .unwrap_or(1.0)
+        .max(0.0) as f64
+}
 
 /// Key that orders f32 values totally (as `f32::total_cmp`) when compared as u32.
 #[inline]
@@ -238,12 +251,6 @@ impl Drainage {
     /// Number of closed lakes in the last computation (see [`Drainage::lake_area_ratio`]).
     pub fn closed_lake_count(&self) -> usize {
         self.closed.len()
-    }
-
-    /// Donors (upstream neighbours draining into `i`) from the last computation.
-    #[inline]
-    pub fn donors_of(&self, i: usize) -> &[u32] {
-        &self.donors[self.donor_start[i] as usize..self.donor_start[i + 1] as usize]
     }
 
     /// Builds the network for surface `elevation_km` (km, sea level 0) with `ocean` marking sea
@@ -435,9 +442,8 @@ impl Drainage {
         //    shrinks to the area its inflow can feed and no longer overflows.
         if let Some(ratio) = self.lake_area_ratio
             && self.lake_sample_count > 0
-            && self.balance_lakes(g, ratio)
         {
-            self.stack_and_areas(g, precipitation, &mut lap);
+            self.balance_lakes(g, ratio, precipitation);
         }
     }
 
@@ -492,12 +498,7 @@ impl Drainage {
         self.area_km2.iter_mut().for_each(|a| *a = 0.0);
         for &i in &self.land {
             let i = i as usize;
-            let p = precipitation
-                .and_then(|p| p.get(i).copied())
-                .filter(|p| p.is_finite())
-                .unwrap_or(1.0)
-                .max(0.0);
-            self.area_km2[i] = g.area_km2[i] * p as f64;
+            self.area_km2[i] = g.area_km2[i] * rain_at(precipitation, i);
         }
         for k in (0..self.stack.len()).rev() {
             let i = self.stack[k] as usize;
@@ -511,9 +512,10 @@ impl Drainage {
 
     /// Step 5 of [`Self::compute`]: closes the lakes whose catchment cannot keep them full
     /// (lake area at the spill point > `ratio` × catchment area), upstream first, so that a
-    /// closed lake's catchment no longer counts for the lakes below it. True when a lake
-    /// closed (the receivers changed: the stack and the areas must be rebuilt).
-    fn balance_lakes(&mut self, g: &ReliefGraph, ratio: f64) -> bool {
+    /// closed lake's catchment no longer counts for the lakes below it. The stack and the
+    /// areas are patched in the closed basins only (see [`Self::close_lake`]); the donor lists
+    /// are left as they were (only this step reads them).
+    fn balance_lakes(&mut self, g: &ReliefGraph, ratio: f64, precipitation: Option<&[f32]>) {
         let n = g.len();
         self.lake_acc.clear();
         self.lake_acc.resize(n, 0.0);
@@ -549,11 +551,15 @@ impl Drainage {
             }
         }
         if self.closing.is_empty() {
-            return false;
+            return;
+        }
+        self.pos.resize(n, 0);
+        for (k, &i) in self.stack.iter().enumerate() {
+            self.pos[i as usize] = k as u32;
         }
         for c in 0..self.closing.len() {
             let (o, catchment) = self.closing[c];
-            self.close_lake(g, o as usize, ratio * catchment);
+            self.close_lake(g, o as usize, ratio * catchment, precipitation);
         }
         // Marks back to 0 (every closed basin lies in the pit-basin region).
         for &i in &self.region {
@@ -566,7 +572,6 @@ impl Drainage {
             .iter()
             .filter(|&&i| self.water_level_km[i as usize] > self.h[i as usize])
             .count();
-        true
     }
 
     /// Closes the lake whose outlet is `o`: its basin (every sample draining through `o`, not
@@ -575,7 +580,19 @@ impl Drainage {
     /// the last of them. Lake samples drain to the sample that flooded them; the others keep
     /// their receiver where it is still lower on the new water surface, else take the steepest
     /// descent on it within the basin.
-    fn close_lake(&mut self, g: &ReliefGraph, o: usize, target_km2: f64) {
+    ///
+    /// The flood visits the basin in order of its final water surface, so every sample comes
+    /// after its receiver: the basin's samples take the basin's stack positions (a set: the
+    /// subtree of the outlet) in flood order, and their drainage areas are summed again along
+    /// it. Nothing else drains into the basin, and what is below the outlet already lost the
+    /// catchment (in [`Self::balance_lakes`]).
+    fn close_lake(
+        &mut self,
+        g: &ReliefGraph,
+        o: usize,
+        target_km2: f64,
+        precipitation: Option<&[f32]>,
+    ) {
         // The basin: the subtree of the outlet.
         self.basin.clear();
         self.basin.push(o as u32);
@@ -699,6 +716,24 @@ impl Drainage {
             }
             self.receiver[i] = r;
             self.receiver_km[i] = d;
+        }
+        // Stack positions and drainage areas of the basin.
+        self.slots.clear();
+        self.slots
+            .extend(self.order.iter().map(|&i| self.pos[i as usize]));
+        self.slots.sort_unstable();
+        for k in 0..self.order.len() {
+            let (i, p) = (self.order[k], self.slots[k]);
+            self.stack[p as usize] = i;
+            self.pos[i as usize] = p;
+            self.area_km2[i as usize] = g.area_km2[i as usize] * rain_at(precipitation, i as usize);
+        }
+        for k in (0..self.order.len()).rev() {
+            let i = self.order[k] as usize;
+            let r = self.receiver[i] as usize;
+            if r != i {
+                self.area_km2[r] += self.area_km2[i];
+            }
         }
     }
 
@@ -853,6 +888,8 @@ pub struct SeaMaskScratch {
     flags: Vec<u8>,
     queue: Vec<u32>,
     seen: Vec<bool>,
+    /// Per sample: at or below sea level (computed once, in parallel).
+    below: Vec<bool>,
 }
 
 const OPEN: u8 = 1;
@@ -886,15 +923,23 @@ pub fn sea_mask_with(
         return;
     }
     let elev = &elevation_km[..elevation_km.len().min(n)];
-    let below = |i: usize| -> bool {
-        match elev.get(i) {
-            Some(&z) => z.is_nan() || z <= 0.0,
-            None => true,
+    const CH: usize = 16384;
+    let mut below_buf = std::mem::take(&mut s.below);
+    below_buf.resize(n, false);
+    below_buf.par_chunks_mut(CH).enumerate().for_each(|(c, b)| {
+        for (k, b) in b.iter_mut().enumerate() {
+            *b = match elev.get(c * CH + k) {
+                Some(&z) => z.is_nan() || z <= 0.0,
+                None => true,
+            };
         }
-    };
+    });
+    let below_v = &below_buf[..];
+    let below = |i: usize| -> bool { below_v[i] };
     let open_at = |i: usize| always_sea.get(i).copied().unwrap_or(false);
     if !g.is_symmetric() {
         sea_mask_bfs(g, &below, &open_at, min_sea_area_km2, out, s);
+        s.below = below_buf;
         return;
     }
     s.parent.resize(n, 0);
@@ -976,7 +1021,6 @@ pub fn sea_mask_with(
         }
     }
     // 4. Write the mask.
-    const CH: usize = 16384;
     let (parent, flags) = (&s.parent, &s.flags);
     out.par_chunks_mut(CH).enumerate().for_each(|(c, o)| {
         let base = c * CH;
@@ -985,6 +1029,7 @@ pub fn sea_mask_with(
             *o = below(i) && flags[parent[i] as usize] & SEA != 0;
         }
     });
+    s.below = below_buf;
 }
 
 /// Area of the body of water containing `start`, summed in breadth-first order from `start`

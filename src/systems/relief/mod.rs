@@ -394,20 +394,27 @@ pub fn erode_rivers(
         let factor = (1.0 - (-k_den * dt).exp()) as f32;
         let den_cap = params.rivers.denudation_cap_km as f32;
         let area = &g.area_km2;
+        // Summed per fixed chunk, then the chunks in order: the same sum whatever the thread
+        // count, without a per-sample buffer.
+        const CH: usize = 8192;
         let extra: f64 = crust
             .elevation_km
-            .par_iter_mut()
-            .zip(flux.eroded_km.par_iter_mut())
+            .par_chunks_mut(CH)
+            .zip(flux.eroded_km.par_chunks_mut(CH))
             .enumerate()
-            .with_min_len(8192)
-            .map(|(i, (z, e))| {
-                if ocean.get(i).copied().unwrap_or(true) || *z <= 0.0 {
-                    return 0.0;
+            .map(|(c, (zs, es))| {
+                let mut sum = 0.0f64;
+                for (k, (z, e)) in zs.iter_mut().zip(es.iter_mut()).enumerate() {
+                    let i = c * CH + k;
+                    if ocean.get(i).copied().unwrap_or(true) || *z <= 0.0 {
+                        continue;
+                    }
+                    let d = z.min(den_cap) * factor;
+                    *z -= d;
+                    *e += d;
+                    sum += d as f64 * area[i];
                 }
-                let d = z.min(den_cap) * factor;
-                *z -= d;
-                *e += d;
-                d as f64 * area[i]
+                sum
             })
             .collect::<Vec<f64>>()
             .iter()

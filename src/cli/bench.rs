@@ -23,6 +23,15 @@ pub(crate) struct BenchArgs {
     /// Extra forced resamplings to time after the steps.
     #[arg(long, default_value_t = 5)]
     pub(crate) resamplings: u64,
+    /// Print the layout of the paper's Table 2 instead (Cortial et al. 2019: subduction,
+    /// collision, elevation, total per step, oceanic crust generation, rifting) at 60k, 100k,
+    /// 250k and 500k samples, each from a 250 My run of its own (`--samples`, `--steps` and
+    /// `--resamplings` are not used), with the paper's figures beside ours.
+    #[arg(long)]
+    pub(crate) table2: bool,
+    /// With `--table2`: divide the sample counts by this (a quick look; the tests use it).
+    #[arg(long, default_value_t = 1, hide = true)]
+    pub(crate) table2_divisor: u64,
 }
 
 /// Peak resident memory of this process (VmHWM), bytes, where the OS tells.
@@ -72,6 +81,9 @@ pub(crate) fn bench_rifts(sim: &mut Simulation, n: usize) -> Result<Vec<f64>> {
 }
 
 pub(crate) fn bench(a: BenchArgs) -> Result<()> {
+    if a.table2 {
+        return super::table2::table2(&a);
+    }
     let (params, plugins) = planet_params(&a.planet)?;
     check_run_length(
         &format!("--steps {} and --resamplings {}", a.steps, a.resamplings),

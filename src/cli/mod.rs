@@ -5,6 +5,7 @@
 pub(crate) mod bench;
 pub(crate) mod export;
 pub(crate) mod run;
+pub(crate) mod table2;
 #[cfg(feature = "viewer")]
 pub(crate) mod view;
 

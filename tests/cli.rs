@@ -501,3 +501,58 @@ fn bench_table2_prints_the_papers_layout_with_ours_beside_it() {
     let (whole, _) = row("whole planet, 250 My (s)");
     assert!(whole[3] > whole[0], "whole planet times {whole:?}");
 }
+
+/// `--init flood-fill` starts from flood-filled plates (each wholly continental or oceanic), so
+/// its crust-type map differs from the Voronoi start's; `--init voronoi` is the default.
+/// Seen to fail with the flag parsed but not applied.
+#[test]
+fn init_flag_picks_the_start_method() {
+    let run = |init: Option<&str>| -> Vec<u8> {
+        let out = temp_dir(&format!("init-{}", init.unwrap_or("default")));
+        let mut args = vec![
+            "generate",
+            "--quiet",
+            "--samples",
+            "3000",
+            "--plates",
+            "10",
+            "--my",
+            "0",
+            "--width",
+            "128",
+            "--backend",
+            "cpu",
+            "--out",
+        ];
+        let dir = out.to_string_lossy().to_string();
+        args.push(&dir);
+        if let Some(m) = init {
+            args.extend(["--init", m]);
+        }
+        let o = planet().args(&args).output().expect("run planet generate");
+        assert!(
+            o.status.success(),
+            "generate {init:?} failed: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        std::fs::read(out.join("crust_type.png")).expect("crust_type.png")
+    };
+    let default = run(None);
+    assert_eq!(run(Some("voronoi")), default, "voronoi is not the default");
+    assert_ne!(
+        run(Some("flood-fill")),
+        default,
+        "--init flood-fill changed nothing"
+    );
+    // A method that does not exist is a usage error naming the flag and the choices.
+    let o = planet()
+        .args(["generate", "--init", "crater"])
+        .output()
+        .expect("run planet");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("--init") && err.contains("crater") && err.contains("flood-fill"),
+        "{err}"
+    );
+}

@@ -408,12 +408,9 @@ fn same_seed_same_bits_with_one_thread_or_two() {
     );
 }
 
-#[test]
-fn initial_plates_do_not_depend_on_resolution() {
-    let mut a = Simulation::new(params(50_000, 4)).unwrap();
-    let mut b = Simulation::new(params(200_000, 4)).unwrap();
-    let ma = a.plate_table();
-    let mb = b.plate_table();
+/// Area-weighted share of a 720×360 map on which planets `a` and `b` have the same plate, and
+/// the same crust type.
+fn map_agreement(a: &Simulation, b: &Simulation) -> (f64, f64) {
     let sa = CrustSampler {
         mesh: a.mesh(),
         crust: a.crust(),
@@ -423,8 +420,7 @@ fn initial_plates_do_not_depend_on_resolution() {
         crust: b.crust(),
     };
     let (w, h) = (720, 360);
-    let (mut same, mut total) = (0.0, 0.0);
-    let (mut same_land, mut total_land) = (0.0, 0.0);
+    let (mut same, mut same_type, mut total) = (0.0, 0.0, 0.0);
     for r in 0..h {
         let lat = 90.0 - 180.0 * (r as f64 + 0.5) / h as f64;
         let weight = lat.to_radians().cos();
@@ -436,21 +432,26 @@ fn initial_plates_do_not_depend_on_resolution() {
             if x.plate == y.plate {
                 same += weight;
             }
-            total_land += weight;
             if x.continental == y.continental {
-                same_land += weight;
+                same_type += weight;
             }
         }
     }
+    (same / total, same_type / total)
+}
+
+#[test]
+fn initial_plates_do_not_depend_on_resolution() {
+    let mut a = Simulation::new(params(50_000, 4)).unwrap();
+    let mut b = Simulation::new(params(200_000, 4)).unwrap();
+    let ma = a.plate_table();
+    let mb = b.plate_table();
+    let (same, same_land) = map_agreement(&a, &b);
+    assert!(same >= 0.97, "plate maps agree on {:.2}%", 100.0 * same);
     assert!(
-        same / total >= 0.97,
-        "plate maps agree on {:.2}%",
-        100.0 * same / total
-    );
-    assert!(
-        same_land / total_land >= 0.95,
+        same_land >= 0.95,
         "continent maps agree on {:.2}%",
-        100.0 * same_land / total_land
+        100.0 * same_land
     );
     assert_eq!(ma.plates.len(), mb.plates.len());
     for (x, y) in ma.plates.iter().zip(&mb.plates) {
@@ -578,4 +579,80 @@ fn a_plugin_whose_systems_are_not_ordered_is_refused() {
     sim.run_steps(2).unwrap();
     // (0 + 1) * 2 = 2, then (2 + 1) * 2 = 6: added, then doubled.
     assert_eq!(sim.world().resource::<Tally>().0, 6);
+}
+
+/// The flood-fill start (`init.flood_fill`): every sample has a plate, every plate is one
+/// connected region and wholly continental or oceanic, the continents cover the target area to
+/// within one plate, and 50k and 500k samples grow the same plates on at least 95% of the area
+/// (the growth order comes from positions, not sample indices). Seen to fail with the cost of a
+/// km drawn per sample index instead of per position (agreement 67%).
+#[test]
+fn flood_fill_plates_are_whole_connected_and_resolution_independent() {
+    let flood = |samples: u64| {
+        let mut p = params(samples, 5);
+        p.init.flood_fill = true;
+        Simulation::new(p).unwrap()
+    };
+    let a = flood(50_000);
+    let mesh = a.mesh();
+    let c = a.crust();
+    assert!(
+        c.plate
+            .iter()
+            .all(|&p| p != tectonic_planets::resources::NO_PLATE)
+    );
+    let mut plates: Vec<u32> = c.plate.clone();
+    plates.sort_unstable();
+    plates.dedup();
+    assert!(plates.len() >= 30, "{} plates of 40", plates.len());
+    let mut cont_area = 0.0;
+    let mut largest: f64 = 0.0;
+    for &p in &plates {
+        let members: Vec<usize> = (0..mesh.len()).filter(|&i| c.plate[i] == p).collect();
+        let area: f64 = members.iter().map(|&i| mesh.area_km2[i]).sum();
+        largest = largest.max(area);
+        let ty = c.crust_type[members[0]];
+        assert!(
+            members.iter().all(|&i| c.crust_type[i] == ty),
+            "plate {p} mixes crust types"
+        );
+        if ty == CrustType::Continental {
+            cont_area += area;
+        }
+        // Connected: a breadth-first search inside the plate reaches all of it.
+        let mut seen = vec![false; mesh.len()];
+        let mut queue = vec![members[0]];
+        seen[members[0]] = true;
+        let mut head = 0;
+        while head < queue.len() {
+            let i = queue[head];
+            head += 1;
+            for &j in mesh.neighbors_of(i) {
+                let j = j as usize;
+                if !seen[j] && c.plate[j] == p {
+                    seen[j] = true;
+                    queue.push(j);
+                }
+            }
+        }
+        assert_eq!(queue.len(), members.len(), "plate {p} is in pieces");
+    }
+    let total = mesh.total_area_km2();
+    let target = a.params().init.continental_fraction * total;
+    assert!(
+        cont_area >= target && cont_area <= target + largest,
+        "continental {cont_area} km², target {target} km², largest plate {largest} km²"
+    );
+    let b = flood(500_000);
+    let (same, same_type) = map_agreement(&a, &b);
+    assert!(
+        same >= 0.95,
+        "flood-fill plates agree on {:.2}%",
+        100.0 * same
+    );
+    assert!(
+        same_type >= 0.95,
+        "flood-fill continents agree on {:.2}%",
+        100.0 * same_type
+    );
 }

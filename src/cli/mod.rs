@@ -78,6 +78,11 @@ pub(crate) struct PlanetArgs {
     /// Initial fraction of the surface covered by continental crust.
     #[arg(long)]
     pub(crate) continental_fraction: Option<f64>,
+    /// How the first plates are made: `voronoi` (warped Voronoi cells, continents from a noise
+    /// field; the default) or `flood-fill` (plates grown from seed points, each wholly
+    /// continental or oceanic). Sets `init.flood_fill`.
+    #[arg(long)]
+    pub(crate) init: Option<InitMethod>,
     #[command(flatten)]
     pub(crate) switches: SwitchArgs,
     /// Worker threads (default: all cores). Results do not depend on it.
@@ -87,6 +92,15 @@ pub(crate) struct PlanetArgs {
     /// software ones included), cpu.
     #[arg(long, default_value = "auto")]
     pub(crate) backend: BackendChoice,
+}
+
+/// The start methods of `--init`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum InitMethod {
+    /// Warped Voronoi plates, continents from a noise field.
+    Voronoi,
+    /// Plates grown from seed points over the sample graph.
+    FloodFill,
 }
 
 /// Phenomena to switch on or off.
@@ -228,6 +242,13 @@ pub(crate) fn load_params(a: &PlanetArgs, base: Params) -> Result<Params> {
             &mut params,
             "init.continental_fraction",
             ParamValue::Float(f),
+        )?;
+    }
+    if let Some(m) = a.init {
+        set(
+            &mut params,
+            "init.flood_fill",
+            ParamValue::Bool(m == InitMethod::FloodFill),
         )?;
     }
     params.validate()?;

@@ -3,6 +3,14 @@
 //! biased per plate is highest (exactly the target continental area), random Euler poles and
 //! speeds, and initial elevation, thickness and age by crust type.
 //!
+//! With `init.flood_fill` the plates are grown instead from their seed points over the sample
+//! graph (seed 003's flood fill): the sample nearest each plate's centroid starts it, and the
+//! plates grow in order of arrival, a sample joining the first plate to reach it, where crossing
+//! a km costs exp(roughness × noise) (a noise field on positions: the "shuffled frontier" drawn
+//! from positions, not from sample indices). Each plate is continental or oceanic as a whole:
+//! plates in a random order (per plate) are continental until `continental_fraction` of the area
+//! is. Relief near the coasts tapers over 500 km, measured along the graph.
+//!
 //! Every random draw is made per plate (from the seed and the plate number) or per position
 //! (noise evaluated at the sample's position), never per sample index, so the same seed gives
 //! the same plates, motions and continents at any resolution.
@@ -107,6 +115,214 @@ fn warped_voronoi(
     (nearest.iter().map(|n| n.0).collect(), nearest)
 }
 
+/// Distance over which the flood-fill start tapers its relief from the coast, km.
+const FLOOD_COAST_KM: f64 = 500.0;
+
+/// The sample nearest `p` (ties to the lower index).
+fn nearest_sample(mesh: &SphereMesh, p: DVec3) -> usize {
+    mesh.positions
+        .par_iter()
+        .enumerate()
+        .with_min_len(4096)
+        .map(|(i, q)| (q.dot(p), i))
+        .reduce(
+            || (f64::NEG_INFINITY, usize::MAX),
+            |a, b| {
+                if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
+                    b
+                } else {
+                    a
+                }
+            },
+        )
+        .1
+}
+
+/// Multi-source Dijkstra over the sample graph: the cost of each edge is `cost(i, j)`; `dist`
+/// holds the sources' starting values (and `f64::INFINITY` elsewhere) and gets the distances;
+/// `label` (when given) takes, at each sample, the label of the source that reached it first.
+/// Ties break by sample index: deterministic.
+fn dijkstra(
+    mesh: &SphereMesh,
+    dist: &mut [f64],
+    mut label: Option<&mut [u32]>,
+    cost: impl Fn(usize, usize) -> f64,
+) {
+    use std::cmp::Reverse;
+    let mut heap: std::collections::BinaryHeap<Reverse<(u64, u32)>> = dist
+        .iter()
+        .enumerate()
+        .filter(|(_, d)| d.is_finite())
+        .map(|(i, d)| Reverse((d.to_bits(), i as u32)))
+        .collect();
+    while let Some(Reverse((bits, i))) = heap.pop() {
+        let (i, d) = (i as usize, f64::from_bits(bits));
+        if d > dist[i] {
+            continue;
+        }
+        for &j in mesh.neighbors_of(i) {
+            let j = j as usize;
+            let dj = d + cost(i, j);
+            if dj < dist[j] {
+                dist[j] = dj;
+                if let Some(l) = label.as_deref_mut() {
+                    l[j] = l[i];
+                }
+                heap.push(Reverse((dj.to_bits(), j as u32)));
+            }
+        }
+    }
+}
+
+/// Plates grown from the samples nearest `centroids` (see the module documentation); a plate
+/// whose seed sample another plate took first gets no samples.
+fn flood_fill_plates(mesh: &SphereMesh, params: &Params, centroids: &[DVec3]) -> Vec<u32> {
+    let n = mesh.len();
+    let r = params.planet.radius_km;
+    let rough = params.init.flood_fill_roughness;
+    let wl = params.init.border_warp_wavelength_km / r;
+    let nseed = noise_seed(params.planet.seed, 6);
+    // Cost of a km at each sample.
+    let per_km: Vec<f64> = mesh
+        .positions
+        .par_iter()
+        .with_min_len(1024)
+        .map(|&p| (rough * fbm(nseed, p, wl, 5)).exp())
+        .collect();
+    let mut dist = vec![f64::INFINITY; n];
+    let mut plate = vec![NO_PLATE; n];
+    for (k, &c) in centroids.iter().enumerate() {
+        let s = nearest_sample(mesh, c);
+        if plate[s] == NO_PLATE {
+            plate[s] = k as u32;
+            dist[s] = 0.0;
+        }
+    }
+    let pos = &mesh.positions;
+    dijkstra(mesh, &mut dist, Some(&mut plate), |i, j| {
+        angle_between(pos[i], pos[j]) * r * 0.5 * (per_km[i] + per_km[j])
+    });
+    plate
+}
+
+/// The Voronoi start: plates by warped Voronoi (defragmented), continents where fBm noise plus
+/// a per-plate bias (softened across borders) is highest, exactly `target` km² of them.
+/// Returns the plates, the continental mask and each sample's score above the threshold.
+fn voronoi_start(
+    mesh: &SphereMesh,
+    params: &Params,
+    centroids: &[DVec3],
+    target: f64,
+) -> (Vec<u32>, Vec<bool>, Vec<f64>) {
+    let n = mesh.len();
+    let seed = params.planet.seed;
+    let r = params.planet.radius_km;
+    let n_plates = centroids.len();
+    let (mut plate, nearest) = warped_voronoi(mesh, params, centroids);
+    let mut unused = n_plates as u32;
+    defragment_plates(mesh, &mut plate, f64::INFINITY, false, &mut unused);
+    let bias: Vec<f64> = (0..n_plates as u64)
+        .map(|i| 2.0 * unit_f64(hash3(seed, stream::PLATE_CONTINENT, i)) - 1.0)
+        .collect();
+    let cont_wl = params.init.continent_wavelength_km / r;
+    let border_soft = (params.init.border_warp_km.max(300.0) / r).max(1e-6);
+    let cseed = noise_seed(seed, 2);
+    let score: Vec<f64> = mesh
+        .positions
+        .par_iter()
+        .zip(nearest.par_iter())
+        .with_min_len(1024)
+        .map(|(&p, &(i1, i2, gap))| {
+            let t = smoothstep(0.0, border_soft, gap);
+            let b1 = bias[i1 as usize];
+            let b = 0.5 * (b1 + bias[i2 as usize]) * (1.0 - t) + b1 * t;
+            0.6 * fbm(cseed, p, cont_wl, 6) + 0.5 * b
+        })
+        .collect();
+    let mut order: Vec<u32> = (0..n as u32).collect();
+    order.par_sort_unstable_by(|&a, &b| {
+        score[b as usize]
+            .total_cmp(&score[a as usize])
+            .then(a.cmp(&b))
+    });
+    let mut acc = 0.0;
+    let mut threshold = f64::INFINITY;
+    for &s in &order {
+        if acc >= target {
+            break;
+        }
+        acc += mesh.area_km2[s as usize];
+        threshold = score[s as usize];
+    }
+    drop(order);
+    let continental = score
+        .iter()
+        .map(|&s| s >= threshold && target > 0.0)
+        .collect();
+    let h = score.iter().map(|&s| s - threshold).collect();
+    (plate, continental, h)
+}
+
+/// The flood-fill start (see the module documentation). Returns the plates, the continental
+/// mask, and the distance to the coast in the units of the Voronoi start's score (0.12 at
+/// [`FLOOD_COAST_KM`] inland, −0.1 as far out at sea).
+fn flood_fill_start(
+    mesh: &SphereMesh,
+    params: &Params,
+    centroids: &[DVec3],
+    target: f64,
+) -> (Vec<u32>, Vec<bool>, Vec<f64>) {
+    let n = mesh.len();
+    let seed = params.planet.seed;
+    let r = params.planet.radius_km;
+    let plate = flood_fill_plates(mesh, params, centroids);
+    let mut area = vec![0.0f64; centroids.len()];
+    for (i, &p) in plate.iter().enumerate() {
+        if p != NO_PLATE {
+            area[p as usize] += mesh.area_km2[i];
+        }
+    }
+    // Plates in a random order (per plate) are continental until the target area is.
+    let mut order: Vec<u64> = (0..centroids.len() as u64)
+        .filter(|&k| area[k as usize] > 0.0)
+        .collect();
+    order.sort_by_key(|&k| (hash3(seed, stream::PLATE_CONTINENT, k), k));
+    let mut is_cont = vec![false; centroids.len()];
+    let mut acc = 0.0;
+    for &k in &order {
+        if acc >= target {
+            break;
+        }
+        is_cont[k as usize] = true;
+        acc += area[k as usize];
+    }
+    let continental: Vec<bool> = plate
+        .iter()
+        .map(|&p| p != NO_PLATE && is_cont[p as usize])
+        .collect();
+    // Distance to the coast: from the samples next to crust of the other type.
+    let mut dist: Vec<f64> = (0..n)
+        .map(|i| {
+            let coastal = mesh
+                .neighbors_of(i)
+                .iter()
+                .any(|&j| continental[j as usize] != continental[i]);
+            if coastal { 0.0 } else { f64::INFINITY }
+        })
+        .collect();
+    let pos = &mesh.positions;
+    dijkstra(mesh, &mut dist, None, |i, j| {
+        angle_between(pos[i], pos[j]) * r
+    });
+    let h = (0..n)
+        .map(|i| {
+            let d = dist[i] / FLOOD_COAST_KM;
+            if continental[i] { 0.12 * d } else { -0.1 * d }
+        })
+        .collect();
+    (plate, continental, h)
+}
+
 /// Builds the reference mesh for the parameters.
 pub fn reference_mesh(params: &Params) -> Result<SphereMesh, MeshError> {
     SphereMesh::fibonacci(
@@ -126,49 +342,17 @@ pub fn initial_planet(mesh: &SphereMesh, params: &Params) -> (Crust, Vec<Initial
     let centroids: Vec<DVec3> = (0..n_plates as u64)
         .map(|i| plate_centroid(seed, i))
         .collect();
-    let (mut plate, nearest) = warped_voronoi(mesh, params, &centroids);
-    let mut unused = n_plates as u32;
-    defragment_plates(mesh, &mut plate, f64::INFINITY, false, &mut unused);
-
-    // Continents: fBm noise plus a per-plate bias, softened across borders; the top
-    // `continental_fraction` of the area (by this score) becomes continental crust.
-    let bias: Vec<f64> = (0..n_plates as u64)
-        .map(|i| 2.0 * unit_f64(hash3(seed, stream::PLATE_CONTINENT, i)) - 1.0)
-        .collect();
-    let cont_wl = params.init.continent_wavelength_km / r;
-    let border_soft = (params.init.border_warp_km.max(300.0) / r).max(1e-6);
-    let cseed = noise_seed(seed, 2);
-    let score: Vec<f64> = mesh
-        .positions
-        .par_iter()
-        .zip(nearest.par_iter())
-        .with_min_len(1024)
-        .map(|(&p, &(i1, i2, gap))| {
-            let t = smoothstep(0.0, border_soft, gap);
-            let b1 = bias[i1 as usize];
-            let b = 0.5 * (b1 + bias[i2 as usize]) * (1.0 - t) + b1 * t;
-            0.6 * fbm(cseed, p, cont_wl, 6) + 0.5 * b
-        })
-        .collect();
     let total_area: f64 = mesh.area_km2.iter().sum();
     let target = params.init.continental_fraction * total_area;
-    let mut order: Vec<u32> = (0..n as u32).collect();
-    order.par_sort_unstable_by(|&a, &b| {
-        score[b as usize]
-            .total_cmp(&score[a as usize])
-            .then(a.cmp(&b))
-    });
-    let mut acc = 0.0;
-    let mut threshold = f64::INFINITY;
-    for &s in &order {
-        if acc >= target {
-            break;
-        }
-        acc += mesh.area_km2[s as usize];
-        threshold = score[s as usize];
-    }
-    drop(order);
+    // Per sample: continental or not, and how far from the coast in the units of the Voronoi
+    // start's score (`h` ≥ 0 on land, < 0 at sea).
+    let (plate, continental, h) = if params.init.flood_fill {
+        flood_fill_start(mesh, params, &centroids, target)
+    } else {
+        voronoi_start(mesh, params, &centroids, target)
+    };
 
+    let cont_wl = params.init.continent_wavelength_km / r;
     let eseed = noise_seed(seed, 3);
     let oseed = noise_seed(seed, 4);
     let aseed = noise_seed(seed, 5);
@@ -182,11 +366,11 @@ pub fn initial_planet(mesh: &SphereMesh, params: &Params) -> (Crust, Vec<Initial
         .zip(crust.crust_type.par_iter_mut())
         .zip(crust.thickness_km.par_iter_mut())
         .zip(crust.age_my.par_iter_mut())
-        .zip(mesh.positions.par_iter().zip(score.par_iter()))
+        .zip(mesh.positions.par_iter())
+        .zip(continental.par_iter().zip(h.par_iter()))
         .with_min_len(1024)
-        .for_each(|((((z, ct), e), age), (&p, &s))| {
-            if s >= threshold && target > 0.0 {
-                let h = s - threshold;
+        .for_each(|(((((z, ct), e), age), &p), (&cont, &h))| {
+            if cont {
                 let zc = i.continental_elevation_km * (0.3 + 0.7 * smoothstep(0.0, 0.12, h))
                     + i.elevation_noise_km * fbm(eseed, p, cont_wl / 3.0, 5);
                 *z = zc as f32;
@@ -206,7 +390,7 @@ pub fn initial_planet(mesh: &SphereMesh, params: &Params) -> (Crust, Vec<Initial
                 .clamp(o.abyssal_elevation_km, o.ridge_elevation_km);
                 // Shallower floor close to the continents (continental rise).
                 let margin = if target > 0.0 {
-                    smoothstep(0.0, 0.1, threshold - s)
+                    smoothstep(0.0, 0.1, -h)
                 } else {
                     1.0
                 };

@@ -218,6 +218,8 @@ define_params! {
         elevation_noise_km: f64 = 0.4, 0.0..=5.0, "km", "Amplitude of the low-frequency noise on initial elevations.";
         continental_thickness_km: f64 = 35.0, 1.0..=100.0, "km", "Initial thickness of continental crust.";
         oceanic_thickness_km: f64 = 7.0, 1.0..=100.0, "km", "Thickness of oceanic crust, initial and newly formed (Driftworld's basic thickness e_0).";
+        flood_fill: bool = false, false..=true, "", "Start method: false = warped Voronoi plates with continents from a noise field; true = plates grown from their seed points over the sample graph (seed 003), in an order drawn from a noise field on positions (so every resolution grows the same plates), each plate continental or oceanic as a whole (plates in a random order are continental until continental_fraction of the area is). CLI: --init voronoi|flood-fill.";
+        flood_fill_roughness: f64 = 1.0, 0.0..=5.0, "", "Flood fill: how much the growth speed varies from place to place (cost of a km = exp(roughness × noise)); 0 grows plain geodesic Voronoi cells, larger values more ragged plates.";
     }
     /// Plate motion.
     [plates] Plates {
@@ -937,7 +939,7 @@ mod tests {
     #[test]
     fn schema_is_consistent() {
         let schema = Params::schema();
-        assert_eq!(schema.len(), 88);
+        assert_eq!(schema.len(), 90);
         assert_eq!(schema.len(), BOUNDS.len());
         let mut seen = HashSet::new();
         for (spec, (lo, hi)) in schema.iter().zip(BOUNDS) {

@@ -158,6 +158,20 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
         }
         println!("  {:<26} {:>10.3} ms", set.name(), m);
     }
+    println!("drainage, by pass (median):");
+    for (label, name) in [
+        ("sea mask", "drainage_sea_mask"),
+        ("receivers", "drainage_receivers"),
+        ("pit basins", "drainage_pit_basins"),
+        ("priority flood", "drainage_flood"),
+        ("stack", "drainage_stack"),
+        ("areas", "drainage_areas"),
+        ("lakes' water balance", "drainage_lake_balance"),
+    ] {
+        if let Some(m) = sim.timings().median_ms(name) {
+            println!("  {label:<26} {m:>10.3} ms");
+        }
+    }
     println!("{:<28} {:>10.3} ms", "all sets but resample", per_step_sum);
     println!(
         "{:<28} {:>10.3} ms",

@@ -80,8 +80,8 @@ pub struct Drainage {
     /// Number of samples in pit basins (the flooded region).
     pub region_count: usize,
     /// Wall time of the sub-passes of the last call, ms: receivers, pit basins, flood, stack,
-    /// areas.
-    pub timings_ms: [f64; 5],
+    /// areas, lakes' water balance.
+    pub timings_ms: [f64; 6],
     /// Water balance of closed depressions: the largest lake area a catchment keeps, per km² of
     /// (precipitation-weighted) catchment, i.e. runoff / net evaporation from the lake surface.
     /// A lake whose area at its spill point exceeds this share of its catchment is *closed*:
@@ -440,10 +440,12 @@ impl Drainage {
 
         // 5. Water balance: a lake whose catchment cannot keep it full to its spill point
         //    shrinks to the area its inflow can feed and no longer overflows.
+        self.timings_ms[5] = 0.0;
         if let Some(ratio) = self.lake_area_ratio
             && self.lake_sample_count > 0
         {
             self.balance_lakes(g, ratio, precipitation);
+            self.timings_ms[5] = lap();
         }
     }
 

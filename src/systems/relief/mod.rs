@@ -60,7 +60,7 @@ use crate::gpu::isostasy::isostasy_dispatch;
 use crate::gpu::{FieldMask, GpuContext, pull_or_record, run_or_record};
 use crate::resources::convergence::NONE;
 use crate::resources::params::Params;
-use crate::resources::{ConvergenceField, Crust, CrustType, FrontPoints};
+use crate::resources::{ConvergenceField, Crust, CrustType, FrontPoints, StepTimings};
 
 /// The isostasy constants of `params`.
 pub fn isostasy_params(params: &Params) -> IsostasyParams {
@@ -298,6 +298,7 @@ pub fn build_drainage(
     mut flux: ResMut<SurfaceFlux>,
     rain: Option<Res<Precipitation>>,
     mut gpu: Option<ResMut<GpuContext>>,
+    mut timings: Option<ResMut<StepTimings>>,
 ) {
     // The step's flux starts empty here, for every relief system after this one (they run
     // only with the drainage on, and only on a network built this step).
@@ -319,6 +320,7 @@ pub fn build_drainage(
         return;
     };
     let mut ocean = std::mem::take(&mut network.drainage.ocean);
+    let t_sea = std::time::Instant::now();
     sea_mask_with(
         g,
         &crust.elevation_km,
@@ -329,10 +331,28 @@ pub fn build_drainage(
     );
     let rain = rain.as_ref().map(|r| &r.0[..]).filter(|r| r.len() == n);
     network.drainage.lake_area_ratio = lake_area_ratio(&params);
+    let sea_ms = t_sea.elapsed();
     network
         .drainage
         .compute(g, &crust.elevation_km, &ocean, rain);
     network.built = true;
+    if let Some(t) = timings.as_mut() {
+        t.record("drainage_sea_mask", sea_ms);
+        let ms = network.drainage.timings_ms;
+        for (name, k) in [
+            ("drainage_receivers", 0),
+            ("drainage_pit_basins", 1),
+            ("drainage_flood", 2),
+            ("drainage_stack", 3),
+            ("drainage_areas", 4),
+            ("drainage_lake_balance", 5),
+        ] {
+            t.record(
+                name,
+                std::time::Duration::from_secs_f64(ms[k].max(0.0) * 1e-3),
+            );
+        }
+    }
 }
 
 /// Stream-power incision and hillslope diffusion along the network (phenomenon `rivers`): the

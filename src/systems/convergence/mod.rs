@@ -131,3 +131,129 @@ pub fn propagate_nearest(
         }
     });
 }
+
+/// [`propagate_nearest`] where a label reaches only the samples of its own group: `allowed(s,
+/// l)` is `group[s] == group_of_label(l)` (a plate: front distances run through one plate's
+/// samples). Labels of different groups then never meet, and the bucket queue handles each
+/// group's entries in the same order whether the groups run together or apart, so each group
+/// runs on its own (in parallel, on arrays as small as the group): the same distances and labels
+/// as [`propagate_nearest`], bit for bit, with any number of threads. (A label whose group is
+/// `u32::MAX` reaches nothing.)
+#[allow(clippy::too_many_arguments)]
+pub fn propagate_nearest_grouped(
+    mesh: &SphereMesh,
+    seeds: &[(u32, u32)],
+    origin: impl Fn(u32) -> DVec3 + Sync,
+    group: &[u32],
+    group_of_label: impl Fn(u32) -> u32 + Sync,
+    max_rad: f64,
+    dist_rad: &mut [f32],
+    label: &mut [u32],
+) {
+    const NO_GROUP: u32 = u32::MAX;
+    // Seeds by group (kept in their order), and a slot per group that has any.
+    let mut slot_of_group: Vec<u32> = Vec::new();
+    let mut group_seeds: Vec<Vec<(u32, u32)>> = Vec::new();
+    let mut group_ids: Vec<u32> = Vec::new();
+    for &(s, l) in seeds {
+        let g = group_of_label(l);
+        if g == NO_GROUP || group[s as usize] != g {
+            continue;
+        }
+        if g as usize >= slot_of_group.len() {
+            slot_of_group.resize(g as usize + 1, NO_GROUP);
+        }
+        if slot_of_group[g as usize] == NO_GROUP {
+            slot_of_group[g as usize] = group_seeds.len() as u32;
+            group_seeds.push(Vec::new());
+            group_ids.push(g);
+        }
+        group_seeds[slot_of_group[g as usize] as usize].push((s, l));
+    }
+    // The samples of those groups, and where each sample sits in its group.
+    let mut members: Vec<Vec<u32>> = vec![Vec::new(); group_seeds.len()];
+    let mut local = vec![u32::MAX; mesh.len()];
+    for (s, &g) in group.iter().enumerate() {
+        if let Some(&k) = slot_of_group.get(g as usize)
+            && k != NO_GROUP
+        {
+            let m = &mut members[k as usize];
+            local[s] = m.len() as u32;
+            m.push(s as u32);
+        }
+    }
+    let max_chord = 2.0 * (0.5 * max_rad.min(std::f64::consts::PI)).sin();
+    let width = 0.5 * mesh.mean_spacing_rad();
+    let (local, dist_in, label_in) = (&local, &*dist_rad, &*label);
+    let results: Vec<(Vec<f32>, Vec<u32>)> = (0..group_seeds.len())
+        .into_par_iter()
+        .map(|k| {
+            let (g, samples) = (group_ids[k], &members[k]);
+            let mut dist: Vec<f32> = samples.iter().map(|&s| dist_in[s as usize]).collect();
+            let mut lab: Vec<u32> = samples.iter().map(|&s| label_in[s as usize]).collect();
+            let mut settled = vec![false; samples.len()];
+            // The loop of `propagate_nearest` on the group's own arrays (index `local`).
+            let chord = |a: DVec3, b: DVec3| (a - b).length();
+            let mut buckets: Vec<Vec<(u32, u32, f32)>> = Vec::new();
+            let offer = |buckets: &mut Vec<Vec<(u32, u32, f32)>>,
+                         dist: &mut [f32],
+                         lab: &mut [u32],
+                         cur: usize,
+                         c: f64,
+                         node: u32,
+                         l: u32| {
+                let n = local[node as usize] as usize;
+                if c > max_chord || (c as f32) >= dist[n] {
+                    return;
+                }
+                dist[n] = c as f32;
+                lab[n] = l;
+                let b = ((c / width) as usize).max(cur);
+                if b >= buckets.len() {
+                    buckets.resize_with(b + 1, Vec::new);
+                }
+                buckets[b].push((node, l, c as f32));
+            };
+            for &(s, l) in &group_seeds[k] {
+                let c = chord(mesh.positions[s as usize], origin(l));
+                offer(&mut buckets, &mut dist, &mut lab, 0, c, s, l);
+            }
+            let mut cur = 0;
+            while cur < buckets.len() {
+                let mut i = 0;
+                while i < buckets[cur].len() {
+                    let (node, l, c) = buckets[cur][i];
+                    i += 1;
+                    let n = local[node as usize] as usize;
+                    if settled[n] || lab[n] != l || c > dist[n] {
+                        continue;
+                    }
+                    settled[n] = true;
+                    let o = origin(l);
+                    for &h in mesh.neighbors_of(node as usize) {
+                        let h = h as usize;
+                        if group[h] != g || settled[local[h] as usize] {
+                            continue;
+                        }
+                        let c = chord(mesh.positions[h], o);
+                        offer(&mut buckets, &mut dist, &mut lab, cur, c, h as u32, l);
+                    }
+                }
+                buckets[cur] = Vec::new();
+                cur += 1;
+            }
+            (dist, lab)
+        })
+        .collect();
+    for (k, (dist, lab)) in results.into_iter().enumerate() {
+        for (i, &s) in members[k].iter().enumerate() {
+            dist_rad[s as usize] = dist[i];
+            label[s as usize] = lab[i];
+        }
+    }
+    dist_rad.par_iter_mut().with_min_len(4096).for_each(|d| {
+        if d.is_finite() {
+            *d = (2.0 * (0.5 * *d as f64).min(1.0).asin()) as f32;
+        }
+    });
+}

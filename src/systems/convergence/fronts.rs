@@ -7,7 +7,7 @@ use bevy_ecs::prelude::*;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::propagate_nearest_grouped;
+use super::propagate_nearest;
 use crate::components::{
     FrontKind, Plate, PlateBounds, PlateFrame, PlateId, PlateMotion, PlateStats, SubductionFront,
 };
@@ -248,27 +248,27 @@ pub fn build_fronts(world: &mut World) {
         let fp = &fp;
         rayon::join(
             || {
-                propagate_nearest_grouped(
+                propagate_nearest(
                     mesh,
                     &over_seeds,
                     origin,
-                    &crust.plate,
-                    |l| fp.overriding[l as usize],
+                    |s, l| crust.plate[s] == fp.overriding[l as usize],
                     params.subduction.distance_km / r_km,
                     overriding_distance_km,
                     overriding_point,
+                    &mut Vec::new(),
                 )
             },
             || {
-                propagate_nearest_grouped(
+                propagate_nearest(
                     mesh,
                     &sub_seeds,
                     origin,
-                    &crust.plate,
-                    |l| fp.subducting[l as usize],
+                    |s, l| crust.plate[s] == fp.subducting[l as usize],
                     sub_limit,
                     subducting_distance_km,
                     subducting_point,
+                    &mut Vec::new(),
                 )
             },
         );

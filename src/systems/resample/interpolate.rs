@@ -240,9 +240,31 @@ fn spread_continent(
     for &s in starts {
         visited[s as usize] = true;
     }
+    // A claim that cannot be paid walks the whole globe (most of a resampling's time when it
+    // happened). Past `CLAIM_WATCH` samples, the claim keeps count of the samples it could still
+    // turn (unvisited ocean next to the claiming plate's continent; only a turned sample adds
+    // any) and stops when none is left: what it would visit after that changes nothing.
+    const CLAIM_WATCH: usize = 16_384;
+    let mut discovered = starts.len();
+    let mut watch: Option<(Vec<bool>, usize)> = None;
     while let Some(u) = queue.pop_front() {
         if debt == 0 {
             break;
+        }
+        if let Spread::Claim(p) = spread {
+            if watch.is_none() && discovered > CLAIM_WATCH {
+                let mut open = vec![false; next.len()];
+                let mut count = 0;
+                for s in 0..next.len() {
+                    if next.plate[s] == p && next.crust_type[s] == CrustType::Continental {
+                        mark_claimable(mesh, next, visited, &mut open, &mut count, s);
+                    }
+                }
+                watch = Some((open, count));
+            }
+            if watch.as_ref().is_some_and(|w| w.1 == 0) {
+                break;
+            }
         }
         let u = u as usize;
         for &v in mesh.neighbors_of(u) {
@@ -252,6 +274,13 @@ fn spread_continent(
                 continue;
             }
             visited[v] = true;
+            discovered += 1;
+            if let Some((open, count)) = watch.as_mut()
+                && open[v]
+            {
+                open[v] = false;
+                *count -= 1;
+            }
             // When claiming, only ocean right next to the claiming plate's own continent.
             let owner_ok = match spread {
                 Spread::Within(_) | Spread::Anywhere => true,
@@ -272,6 +301,9 @@ fn spread_continent(
                 next.fold_dir[v] = next.fold_dir[u];
                 if let Spread::Claim(p) = spread {
                     next.plate[v] = p;
+                    if let Some((open, count)) = watch.as_mut() {
+                        mark_claimable(mesh, next, visited, open, count, v);
+                    }
                 }
                 debt -= 1;
             }
@@ -279,4 +311,27 @@ fn spread_continent(
         }
     }
     debt
+}
+
+/// Marks in `open` (and counts) the unvisited oceanic samples next to continental sample `u`
+/// that a claim could still turn (see [`spread_continent`]).
+fn mark_claimable(
+    mesh: &SphereMesh,
+    next: &Crust,
+    visited: &[bool],
+    open: &mut [bool],
+    count: &mut usize,
+    u: usize,
+) {
+    for &v in mesh.neighbors_of(u) {
+        let v = v as usize;
+        if !visited[v]
+            && !open[v]
+            && next.plate[v] != NO_PLATE
+            && next.crust_type[v] == CrustType::Oceanic
+        {
+            open[v] = true;
+            *count += 1;
+        }
+    }
 }

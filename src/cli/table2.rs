@@ -154,7 +154,14 @@ pub(crate) fn table2(a: &BenchArgs) -> Result<()> {
     );
     row(
         "sample points",
-        std::array::from_fn(|k| format!("{:.1}k", (SAMPLES[k] / divisor) as f64 / 1000.0)),
+        std::array::from_fn(|k| {
+            let n = SAMPLES[k] / divisor;
+            if n % 1000 == 0 {
+                format!("{}k", n / 1000)
+            } else {
+                format!("{:.1}k", n as f64 / 1000.0)
+            }
+        }),
         SAMPLES.map(|n| format!("{}k", n / 1000)),
     );
     for (r, (label, paper)) in PAPER.iter().enumerate() {

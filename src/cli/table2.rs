@@ -156,7 +156,7 @@ pub(crate) fn table2(a: &BenchArgs) -> Result<()> {
         "sample points",
         std::array::from_fn(|k| {
             let n = SAMPLES[k] / divisor;
-            if n % 1000 == 0 {
+            if n.is_multiple_of(1000) {
                 format!("{}k", n / 1000)
             } else {
                 format!("{:.1}k", n as f64 / 1000.0)

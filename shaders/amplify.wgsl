@@ -40,11 +40,11 @@ const MAX_RELIEF_M: f32 = 4000.0;
 
 const OCEAN_HILL_WAVELENGTH_KM: f32 = 5.0;
 const OCEAN_HILL_STRETCH: f32 = 5.0;
-const OCEAN_HILL_AMP_M: f32 = 220.0;
+const OCEAN_HILL_AMP_M: f32 = 660.0;
 const OCEAN_YOUNG_AGE_MY: f32 = 50.0;
 const FAULT_SPACING_KM: f32 = 60.0;
 const FAULT_WIDTH_KM: f32 = 4.0;
-const FAULT_DEPTH_M: f32 = 500.0;
+const FAULT_DEPTH_M: f32 = 300.0;
 const FAULT_OFFSET_KM: f32 = 2.0;
 const OCEAN_DETAIL_M: f32 = 20.0;
 const PLAIN_WAVELENGTH_KM: f32 = 30.0;
@@ -209,8 +209,10 @@ fn vertex_relief(v: AmplifyVertex, p: vec3<f32>) -> vec2<f32> {
         let trough_mean = FAULT_WIDTH_KM * 1.7724539 / FAULT_SPACING_KM;
         let shift = (hash01(bitcast<u32>(segment) ^ fault_seed ^ 0x68e31da4u) - 0.5)
             * 2.0 * FAULT_OFFSET_KM;
-        let hills = fbm2(seed, (x + shift) / OCEAN_HILL_WAVELENGTH_KM,
-            y / (OCEAN_HILL_WAVELENGTH_KM * OCEAN_HILL_STRETCH), 3u, 0.5);
+        // Abyssal hills parallel to the ridge (x: ridge axis, y: spreading direction); each
+        // segment offset across the ridge.
+        let hills = fbm2(seed, x / (OCEAN_HILL_WAVELENGTH_KM * OCEAN_HILL_STRETCH),
+            (y + shift) / OCEAN_HILL_WAVELENGTH_KM, 3u, 0.5);
         let relief = young * (OCEAN_HILL_AMP_M * 1.4 * hills - FAULT_DEPTH_M * (trough - trough_mean));
         return vec2<f32>(relief, OCEAN_DETAIL_M);
     } else if (v.kind == KIND_PLAIN) {
@@ -232,8 +234,9 @@ fn vertex_relief(v: AmplifyVertex, p: vec3<f32>) -> vec2<f32> {
     let fresh = exp(-max(v.age_my, 0.0) / OROGENY_OLD_AGE_MY);
     let amp = amp0 * height * (0.35 + 0.65 * fresh);
     let gain = 0.35 + 0.2 * fresh;
-    let gx = x / (wl * stretch);
-    let gy = y / wl;
+    // x: compression_dir (the fold direction), y: range_axis; crests run along the range axis.
+    let gx = x / wl;
+    let gy = y / (wl * stretch);
     // One noise per octave feeds both the ridged (young) and the rounded (old) relief.
     var ridges = 0.0;
     var rounded = 0.0;

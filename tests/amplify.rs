@@ -286,42 +286,81 @@ fn hundred_metre_tile_averaged_down_matches_the_global_map() {
     assert!(mean.abs() < 40.0, "bias {mean}");
 }
 
+/// The stored fold direction is the direction of compression (paper §4.1), so a range's axis
+/// is perpendicular to it: crests must run along the range axis. Seen to fail with the grain
+/// turned back along the compression (the code before 2026-12-02): along −0.11, across 0.60.
 #[test]
-fn mountain_relief_runs_along_the_fold_direction() {
+fn mountain_crests_run_along_the_range_axis() {
     let centre = from_lat_lon_deg(5.0, 30.0);
-    for fold_north in [false, true] {
-        let (mesh, crust) = synthetic(20_000, fold_north, 10.0);
+    for compression_north in [false, true] {
+        let (mesh, crust) = synthetic(20_000, compression_north, 10.0);
         let amp = Amplifier::new(&mesh, &crust, 5, AmplifyOptions::default());
-        let along = |p: DVec3| {
+        let range_axis = |p: DVec3| {
             let (e, n) = east_north(p);
-            if fold_north { n } else { e }
+            if compression_north { e } else { n }
         };
-        let across = |p: DVec3| {
+        let compression = |p: DVec3| {
             let (e, n) = east_north(p);
-            if fold_north { e } else { n }
+            if compression_north { n } else { e }
         };
-        let ca = lag_correlation(&amp, centre, along, 6.0, 40);
-        let cx = lag_correlation(&amp, centre, across, 6.0, 40);
-        println!("fold north={fold_north}: correlation at 6 km along {ca:.2}, across {cx:.2}");
+        let ca = lag_correlation(&amp, centre, range_axis, 6.0, 40);
+        let cx = lag_correlation(&amp, centre, compression, 6.0, 40);
+        println!(
+            "compression north={compression_north}: correlation at 6 km along the range {ca:.2}, across {cx:.2}"
+        );
         assert!(
             ca > cx + 0.25,
-            "fold north={fold_north}: along {ca:.2}, across {cx:.2}"
+            "compression north={compression_north}: along the range {ca:.2}, across {cx:.2}"
         );
     }
 }
 
+/// Around a sutured terrane the fold direction points away from it (radial compression), so
+/// the crests wrap the terrane in arcs: at a point east of the terrane the relief is more
+/// correlated north–south (tangential) than east–west (radial). Seen to fail with the grain
+/// along the compression.
 #[test]
-fn oceanic_relief_runs_across_ridges_and_is_stronger_on_young_floor() {
+fn crests_wrap_a_sutured_terrane_in_arcs() {
+    let (mesh, mut crust) = synthetic(20_000, false, 10.0);
+    let terrane = from_lat_lon_deg(0.0, 30.0);
+    for (i, &p) in mesh.positions.iter().enumerate() {
+        if crust.orogeny[i] == Orogeny::None {
+            continue;
+        }
+        crust.orogeny[i] = Orogeny::Himalayan;
+        // Away from the terrane, in the tangent plane at p.
+        let away = (p - terrane).reject_from(p).normalize_or_zero();
+        crust.fold_dir[i] = [away.x as f32, away.y as f32, away.z as f32];
+    }
+    let amp = Amplifier::new(&mesh, &crust, 5, AmplifyOptions::default());
+    for (lat, lon) in [(0.0, 36.0), (6.0, 30.0)] {
+        let at = from_lat_lon_deg(lat, lon);
+        let radial = |p: DVec3| (p - terrane).reject_from(p).normalize();
+        let tangential = |p: DVec3| p.cross(radial(p)).normalize();
+        let ct = lag_correlation(&amp, at, tangential, 6.0, 30);
+        let cr = lag_correlation(&amp, at, radial, 6.0, 30);
+        println!("suture at ({lat}, {lon}): tangential {ct:.2}, radial {cr:.2}");
+        assert!(
+            ct > cr + 0.2,
+            "({lat}, {lon}): tangential {ct:.2}, radial {cr:.2}"
+        );
+    }
+}
+
+/// Abyssal hills run parallel to the ridge, as on Earth (the transform faults cross it).
+/// Seen to fail with the hills elongated across the ridge (the code before 2026-12-02).
+#[test]
+fn abyssal_hills_run_along_ridges_and_are_stronger_on_young_floor() {
     let (mesh, crust) = synthetic(20_000, false, 10.0);
     let amp = Amplifier::new(&mesh, &crust, 6, AmplifyOptions::default());
     let young = from_lat_lon_deg(10.0, 100.0);
     let north = |p: DVec3| east_north(p).1;
     let east = |p: DVec3| east_north(p).0;
-    // The ridge direction is north: transform-fault structure runs across it (east-west).
+    // The ridge direction is north: the hills are long north-south.
     let ca = lag_correlation(&amp, young, north, 4.0, 40);
     let cx = lag_correlation(&amp, young, east, 4.0, 40);
     println!("ocean: correlation at 4 km along the ridge {ca:.2}, across {cx:.2}");
-    assert!(cx > ca + 0.25, "along {ca:.2}, across {cx:.2}");
+    assert!(ca > cx + 0.25, "along {ca:.2}, across {cx:.2}");
     let (s_young, s_old) = (
         std_relief(&amp, young),
         std_relief(&amp, from_lat_lon_deg(10.0, -100.0)),
@@ -360,8 +399,10 @@ fn old_ranges_are_lower_and_smoother_than_young_ones() {
     assert!(plain < 0.25 * so, "plain relief {plain} m");
 }
 
+/// An exemplar's ridges are laid along the range axis (perpendicular to the fold direction,
+/// which is the compression). Seen to fail with them laid along the compression.
 #[test]
-fn exemplars_follow_the_fold_direction_and_replace_procedural_relief() {
+fn exemplars_follow_the_range_axis_and_replace_procedural_relief() {
     let (mesh, crust) = synthetic(20_000, true, 10.0);
     // One Andean exemplar with ridges along its rows' direction (angle 0), 200 m pixels.
     let z = synthetic_exemplar(128, 0.0, 20.0, 2500.0, 9);
@@ -378,9 +419,10 @@ fn exemplars_follow_the_fold_direction_and_replace_procedural_relief() {
     assert_ne!(proc_amp.elevation_m(p), ex_amp.elevation_m(p));
     let north = |p: DVec3| east_north(p).1;
     let east = |p: DVec3| east_north(p).0;
-    let ca = lag_correlation(&ex_amp, centre, north, 3.0, 40);
-    let cx = lag_correlation(&ex_amp, centre, east, 3.0, 40);
-    println!("exemplar relief: correlation at 3 km along the fold {ca:.2}, across {cx:.2}");
+    // `synthetic(.., true, ..)`: compression north, so the range axis is east.
+    let ca = lag_correlation(&ex_amp, centre, east, 3.0, 40);
+    let cx = lag_correlation(&ex_amp, centre, north, 3.0, 40);
+    println!("exemplar relief: correlation at 3 km along the range axis {ca:.2}, across {cx:.2}");
     assert!(ca > cx + 0.2, "along {ca:.2}, across {cx:.2}");
 }
 

@@ -244,10 +244,14 @@ impl ExemplarSet {
         ];
         let x = d[0] * v.ax + d[1] * v.ay + d[2] * v.az + v.offset_x_km;
         let y = d[0] * b[0] + d[1] * b[1] + d[2] * b[2] + v.offset_y_km;
-        // (x, y) is along / across the local fold; map x onto the exemplar's fold axis.
+        // x runs along the local fold direction, which is the direction of compression, and y
+        // along the range axis (perpendicular to it). The exemplar's ridges run at
+        // `fold_angle_rad`: map the range axis onto them, and the compression direction onto
+        // the exemplar's across-ridge axis.
+        let (compression_dir, range_axis) = (x, y);
         let (s, c) = e.fold_angle_rad.sin_cos();
-        let col = (x * c - y * s) / e.pixel_km;
-        let row = (x * s + y * c) / e.pixel_km;
+        let col = (range_axis * c + compression_dir * s) / e.pixel_km;
+        let row = (range_axis * s - compression_dir * c) / e.pixel_km;
         let span = (e.range_m.1 - e.range_m.0).max(1.0);
         let scale = if v.kind == KIND_PLAIN {
             1.0

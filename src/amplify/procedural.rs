@@ -11,16 +11,19 @@
 //! points need only one or two primitives. On top comes one isotropic gradient-noise layer
 //! for detail, whose amplitude is blended the same way.
 //!
-//! * Oceanic crust (the paper's choice: Gabor noise oriented by the ridge direction, for the
-//!   transform faults that lie perpendicular to ridges): lineations elongated *across* the
-//!   ridge (correlation length 5× longer across than along it), cut by transform-fault troughs
-//!   that also run across the ridge, every ~60 km along it (jittered), with the lineations
-//!   shifted from one fault segment to the next; all stronger where the crust is young
+//! * Oceanic crust (the vertex axis is the ridge direction: x along the ridge axis, y along
+//!   the spreading direction): abyssal hills elongated *parallel to* the ridge (correlation
+//!   length 5× longer along it than across it), as on Earth, cut by transform-fault troughs
+//!   that run across the ridge every ~60 km along it (jittered), each segment between two
+//!   faults offset across the ridge; all stronger where the crust is young
 //!   (`0.25 + 0.75·exp(-age/50 My)`).
 //! * Continental plains: gentle isotropic relief (±90 m).
-//! * Mountains: ridged noise with its grain along the fold direction (3× longer along than
-//!   across for Andean ranges, 2.5× for Himalayan ones, which are also higher and sharper);
-//!   the amplitude follows the crust's elevation, and old ranges are lower and smoother
+//! * Mountains (the vertex axis is the fold direction, which is the direction of compression,
+//!   paper §4.1: x along `compression_dir`, y along `range_axis`): ridged noise whose crests run
+//!   along the range axis (3× longer along it than across for Andean ranges, 2.5× for
+//!   Himalayan ones, which are also higher and sharper), so a range's crests run along it and
+//!   wrap a sutured terrane (whose fold direction points away from it) in arcs; the amplitude
+//!   follows the crust's elevation, and old ranges are lower and smoother
 //!   (`exp(-orogeny age/150 My)` fades the ridged part toward rounded noise).
 //!
 //! The value depends only on the seed, the tables and the point: never on the output size,
@@ -46,11 +49,12 @@ pub const MAX_RELIEF_M: f32 = 4000.0;
 // Relief constants (metres, km, My). Keep in sync with shaders/amplify.wgsl.
 const OCEAN_HILL_WAVELENGTH_KM: f32 = 5.0;
 const OCEAN_HILL_STRETCH: f32 = 5.0;
-const OCEAN_HILL_AMP_M: f32 = 220.0;
+/// Abyssal hills: about 150 m rms on young floor (observed 50–300 m, Goff & Jordan 1988).
+const OCEAN_HILL_AMP_M: f32 = 660.0;
 const OCEAN_YOUNG_AGE_MY: f32 = 50.0;
 const FAULT_SPACING_KM: f32 = 60.0;
 const FAULT_WIDTH_KM: f32 = 4.0;
-const FAULT_DEPTH_M: f32 = 500.0;
+const FAULT_DEPTH_M: f32 = 300.0;
 const FAULT_OFFSET_KM: f32 = 2.0;
 const OCEAN_DETAIL_M: f32 = 20.0;
 const PLAIN_WAVELENGTH_KM: f32 = 30.0;
@@ -232,6 +236,9 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
     let y = d[0] * b[0] + d[1] * b[1] + d[2] * b[2] + v.offset_y_km;
     let seed = u.seed;
     if v.kind == KIND_OCEAN {
+        // Oceanic crust: the vertex axis is the ridge direction, so x runs along the ridge
+        // axis and y along the spreading direction.
+        let (ridge_axis, spreading_dir) = (x, y);
         let young = 0.25 + 0.75 * (-v.age_my.max(0.0) / OCEAN_YOUNG_AGE_MY).exp();
         // Transform faults: lines across the ridge at jittered positions along it.
         let s = x / FAULT_SPACING_KM;
@@ -255,10 +262,12 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
         let trough_mean = FAULT_WIDTH_KM * 1.772_453_9 / FAULT_SPACING_KM;
         let shift =
             (hash01(segment as u32 ^ fault_seed ^ 0x68e3_1da4) - 0.5) * 2.0 * FAULT_OFFSET_KM;
+        // Abyssal hills run parallel to the ridge (long along x); each ridge segment between
+        // two faults is offset across the ridge (along y), as transform faults offset them.
         let hills = fbm2(
             seed,
-            (x + shift) / OCEAN_HILL_WAVELENGTH_KM,
-            y / (OCEAN_HILL_WAVELENGTH_KM * OCEAN_HILL_STRETCH),
+            ridge_axis / (OCEAN_HILL_WAVELENGTH_KM * OCEAN_HILL_STRETCH),
+            (spreading_dir + shift) / OCEAN_HILL_WAVELENGTH_KM,
             3,
             0.5,
         );
@@ -290,7 +299,12 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
         } else {
             seed ^ 0x85eb_ca6b
         };
-        let (gx, gy) = (x / (wl * stretch), y / wl);
+        // Continental crust: the vertex axis is the fold direction, which is the direction of
+        // compression (paper §4.1; away from the terrane after a collision), so x runs along
+        // `compression_dir` and y along `range_axis`. Crests run along the range axis: the
+        // noise is stretched along y.
+        let (compression_dir, range_axis) = (x, y);
+        let (gx, gy) = (compression_dir / wl, range_axis / (wl * stretch));
         // One noise per octave feeds both the ridged (young) and the rounded (old) relief.
         let (mut ridges, mut rounded, mut norm, mut oamp, mut freq) = (0.0, 0.0, 0.0, 1.0, 1.0);
         let mut o = 0u32;

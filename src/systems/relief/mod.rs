@@ -55,12 +55,15 @@ use self::graph::ReliefGraph;
 use self::isostasy::{AgeDepthLaw, AgeDepthTable, IsostasyParams, RegionalIsostasy, isostasy_cpu};
 use self::sediment::{SedimentBudget, SedimentParams, SedimentRouter};
 use self::stream_power::{StreamPowerParams, StreamPowerScratch, stream_power_erode};
+use crate::components::{Plate, PlateBounds, PlateFrame, PlateMotion, PlateStats};
 use crate::geometry::SphereMesh;
 use crate::gpu::isostasy::isostasy_dispatch;
 use crate::gpu::{FieldMask, GpuContext, pull_or_record, run_or_record};
 use crate::resources::convergence::NONE;
 use crate::resources::params::Params;
-use crate::resources::{ConvergenceField, Crust, CrustType, FrontPoints, StepTimings};
+use crate::resources::{
+    ConvergenceField, Crust, CrustType, FrontPoints, NO_PLATE, PlateTable, StepTimings,
+};
 
 /// The isostasy constants of `params`.
 pub fn isostasy_params(params: &Params) -> IsostasyParams {
@@ -626,6 +629,7 @@ pub fn apply_isostasy(
     mut state: ResMut<ReliefState>,
     fp: Res<FrontPoints>,
     field: Res<ConvergenceField>,
+    plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
     mut gpu: Option<ResMut<GpuContext>>,
 ) {
     // On the GPU backend the host reads only the thickness (for the smoothed root) and crust
@@ -685,22 +689,53 @@ pub fn apply_isostasy(
             .iso
             .smooth_root(g, &host.thickness_km, &state.continental, &iso);
     }
-    // Trench depth per sample, from the current fronts.
+    // Trench depth per sample, from the current fronts: on the subducting crust that has come
+    // to the front (distance to it at the last resampling less the convergence since), and only
+    // on the side the front faces. A sample behind its front point (more than the trench's
+    // width past it, against the front's normal) is not coming to that front: around a plate a
+    // few samples wide, whose single front point is every subducting sample's nearest, the
+    // trench would otherwise close into a ring at the convergence's distance.
     state.trench_km.clear();
     state.trench_km.resize(n, 0.0);
-    if field.subducting_point.len() == n && !fp.is_empty() {
+    if field.subducting_point.len() == n && !fp.is_empty() && host.plate.len() >= n {
         let (depth, width) = (ip.trench_depth_km, ip.trench_width_km);
-        let spacing = mesh.mean_spacing_rad() * mesh.radius_km;
+        let r_km = mesh.radius_km;
+        let spacing = mesh.mean_spacing_rad() * r_km;
+        let table = PlateTable::from_query(&plates);
+        // Each front point's world position and normal (from the overriding plate's frame).
+        let front: Vec<Option<(glam::DVec3, glam::DVec3)>> = (0..fp.len())
+            .map(|k| {
+                let o = table.get(fp.overriding[k])?;
+                let p = mesh.positions.get(fp.sample[k] as usize)?;
+                Some((o.world_from_plate * *p, o.world_from_plate * fp.normal[k]))
+            })
+            .collect();
+        let behind_km = width + spacing;
+        let positions = &mesh.positions;
+        let plate = &host.plate;
         state
             .trench_km
             .par_iter_mut()
+            .enumerate()
             .zip(field.subducting_point.par_iter())
             .zip(field.subducting_distance_km.par_iter())
             .zip(host.crust_type.par_iter())
             .with_min_len(8192)
-            .for_each(|(((t, &sp), &sd), &ct)| {
-                if sp != NONE && ct == CrustType::Oceanic && fp.active[sp as usize] {
-                    let d = sd as f64 - fp.converged_km[sp as usize] as f64;
+            .for_each(|((((i, t), &sp), &sd), &ct)| {
+                if sp == NONE || ct != CrustType::Oceanic || !fp.active[sp as usize] {
+                    return;
+                }
+                let d = sd as f64 - fp.converged_km[sp as usize] as f64;
+                let faces = match (front[sp as usize], plate[i]) {
+                    (Some((w, nrm)), pl) if pl != NO_PLATE => match table.get(pl) {
+                        Some(s) => {
+                            (s.world_from_plate * positions[i] - w).dot(nrm) * r_km >= -behind_km
+                        }
+                        None => true,
+                    },
+                    _ => true,
+                };
+                if faces {
                     *t = trench_depth_on_mesh_km(d, depth, width, spacing) as f32;
                 }
             });

@@ -634,11 +634,7 @@ impl Drainage {
         self.order.clear();
         let (mut lake_area, mut level, mut lake_n) = (0.0f64, hs, 0usize);
         loop {
-            let (c, lc) = if let Some(c) = self.pit_queue.pop_front() {
-                (c as usize, self.water_level_km[c as usize])
-            } else if let Some((k, c)) = self.heap.pop() {
-                (c as usize, level_of_bits(k))
-            } else {
+            let Some((c, lc)) = self.flood_pop() else {
                 break;
             };
             self.order.push(c as u32);
@@ -647,23 +643,7 @@ impl Drainage {
                 level = lc;
                 lake_n = self.order.len();
             }
-            for e in g.edges(c) {
-                let j = g.neighbors[e] as usize;
-                if self.mark[j] != BASIN {
-                    continue;
-                }
-                self.mark[j] = CLOSED;
-                self.parent[j] = c as u32;
-                let hj = self.h[j];
-                let up = lc.next_up();
-                if hj <= up {
-                    self.water_level_km[j] = up.max(hj);
-                    self.pit_queue.push_back(j as u32);
-                } else {
-                    self.water_level_km[j] = hj;
-                    self.heap.push(order_bits(hj), j as u32);
-                }
-            }
+            self.flood_neighbours(g, c, lc, BASIN, CLOSED);
         }
         // The lake: the first `lake_n` samples, at `level`.
         let start = self.closed_members.len() as u32;
@@ -777,6 +757,44 @@ impl Drainage {
         }
     }
 
+    /// The next sample of a priority flood and its water level: flooded samples (the FIFO)
+    /// first, then the lowest of the open set.
+    #[inline]
+    fn flood_pop(&mut self) -> Option<(usize, f32)> {
+        if let Some(c) = self.pit_queue.pop_front() {
+            Some((c as usize, self.water_level_km[c as usize]))
+        } else {
+            self.heap.pop().map(|(k, c)| (c as usize, level_of_bits(k)))
+        }
+    }
+
+    /// Floods the neighbours of `c` (water level `lc`) marked `from`: marks them `to`, makes
+    /// `c` their parent, and queues them at their water level (just above `lc` when they lie
+    /// below it, in the FIFO; their own elevation otherwise). Returns how many.
+    #[inline]
+    fn flood_neighbours(&mut self, g: &ReliefGraph, c: usize, lc: f32, from: u8, to: u8) -> usize {
+        let mut count = 0;
+        for e in g.edges(c) {
+            let j = g.neighbors[e] as usize;
+            if self.mark[j] != from {
+                continue;
+            }
+            self.mark[j] = to;
+            self.parent[j] = c as u32;
+            count += 1;
+            let hj = self.h[j];
+            let up = lc.next_up();
+            if hj <= up {
+                self.water_level_km[j] = up.max(hj);
+                self.pit_queue.push_back(j as u32);
+            } else {
+                self.water_level_km[j] = hj;
+                self.heap.push(order_bits(hj), j as u32);
+            }
+        }
+        count
+    }
+
     /// Priority-Flood+ε over the pit basins, seeded from their boundary.
     fn flood(&mut self, g: &ReliefGraph) {
         let (in_region, done, seed) = (IN_REGION, DONE, SEED);
@@ -800,31 +818,10 @@ impl Drainage {
         let mut remaining = self.region.len();
         loop {
             while remaining > 0 {
-                let (c, lc) = if let Some(c) = self.pit_queue.pop_front() {
-                    (c as usize, self.water_level_km[c as usize])
-                } else if let Some((k, c)) = self.heap.pop() {
-                    (c as usize, level_of_bits(k))
-                } else {
+                let Some((c, lc)) = self.flood_pop() else {
                     break;
                 };
-                for e in g.edges(c) {
-                    let j = g.neighbors[e] as usize;
-                    if self.mark[j] != in_region {
-                        continue;
-                    }
-                    self.mark[j] = done;
-                    self.parent[j] = c as u32;
-                    remaining -= 1;
-                    let hj = self.h[j];
-                    let up = lc.next_up();
-                    if hj <= up {
-                        self.water_level_km[j] = up.max(hj);
-                        self.pit_queue.push_back(j as u32);
-                    } else {
-                        self.water_level_km[j] = hj;
-                        self.heap.push(order_bits(hj), j as u32);
-                    }
-                }
+                remaining -= self.flood_neighbours(g, c, lc, in_region, done);
             }
             if remaining == 0 {
                 break;

@@ -633,10 +633,7 @@ impl Drainage {
         self.heap.push(order_bits(hs), s as u32);
         self.order.clear();
         let (mut lake_area, mut level, mut lake_n) = (0.0f64, hs, 0usize);
-        loop {
-            let Some((c, lc)) = self.flood_pop() else {
-                break;
-            };
+        while let Some((c, lc)) = self.flood_pop() {
             self.order.push(c as u32);
             if lake_area < target_km2 {
                 lake_area += g.area_km2[c];

@@ -569,25 +569,26 @@ pub fn deposit_sediment(
         let ocean = &network.drainage.ocean;
         let (oceanic, age) = (&state.oceanic, &crust.age_my);
         let rains = |i: usize| oceanic[i] && ocean[i] && age[i] < max_age;
-        crust
+        // One pass: each fixed chunk adds its rain and sums its volume, the chunks are summed in
+        // order (the same sum whatever the thread count).
+        const CH: usize = 8192;
+        flux.pelagic_km3 = crust
             .thickness_km
-            .par_iter_mut()
+            .par_chunks_mut(CH)
             .enumerate()
-            .with_min_len(8192)
-            .for_each(|(i, t)| {
-                if rains(i) {
-                    *t += rate_km as f32;
+            .map(|(c, ts)| {
+                let mut sum = 0.0f64;
+                for (k, t) in ts.iter_mut().enumerate() {
+                    let i = c * CH + k;
+                    if rains(i) {
+                        *t += rate_km as f32;
+                        sum += rate_km * g.area_km2[i];
+                    }
                 }
-            });
-        // Summed in index order, as before (no per-step buffer).
-        flux.pelagic_km3 = (0..crust.thickness_km.len())
-            .map(|i| {
-                if rains(i) {
-                    rate_km * g.area_km2[i]
-                } else {
-                    0.0
-                }
+                sum
             })
+            .collect::<Vec<f64>>()
+            .iter()
             .sum();
     } else {
         flux.pelagic_km3 = 0.0;

@@ -176,3 +176,23 @@ fn a_save_from_before_the_relief_keeps_its_relief() {
         land.len()
     );
 }
+
+#[test]
+fn normal_ocean_floor_of_a_whole_planet_follows_the_cooling_law() {
+    // Over all young floor, arcs, sediment fans and trenches blur the law; over the normal floor
+    // (the summary's `ocean_age_depth_r_normal_floor`), depth follows √age.
+    let mut sim = Simulation::new(params(50_000, 3)).unwrap();
+    sim.run_for(150.0).unwrap();
+    let view = sim.resampled_crust();
+    let h = tectonic_planets::io::summary::summarize(&sim, &view).hypsometry;
+    let all = h.ocean_age_depth_r.expect("young floor");
+    let normal = h.ocean_age_depth_r_normal_floor.expect("normal floor");
+    assert!(
+        normal >= 0.9,
+        "normal floor: r = {normal:.3} (all: {all:.3})"
+    );
+    assert!(
+        normal > all,
+        "normal floor r {normal:.3} ≤ all floor r {all:.3}"
+    );
+}

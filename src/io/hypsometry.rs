@@ -96,20 +96,43 @@ pub struct Hypsometry {
     /// arcs, sediment fans and trenches lower it. None with too little young floor.
     #[serde(default)]
     pub ocean_age_depth_r: Option<f64>,
+    /// [`Hypsometry::ocean_age_depth_r`] over the normal floor only: oceanic crust younger than
+    /// [`AGE_DEPTH_MAX_AGE_MY`] outside trenches and carrying at most
+    /// [`NORMAL_FLOOR_MAX_LOAD_KM`] of crust or sediment over the normal oceanic thickness (the
+    /// floor a cooling law governs; Parsons & Sclater 1977 left seamounts, plateaus and
+    /// trenches out of their fit the same way). Set by the summary from the live crust and the
+    /// trench field; None where those are not at hand.
+    #[serde(default)]
+    pub ocean_age_depth_r_normal_floor: Option<f64>,
 }
 
 /// Oldest oceanic crust (My) that [`Hypsometry::ocean_age_depth_r`] and [`age_depth_r`] count.
 pub const AGE_DEPTH_MAX_AGE_MY: f32 = 80.0;
 
+/// Load (km of crust or sediment over the normal oceanic thickness) above which oceanic crust is
+/// an arc, a plateau or a sediment fan rather than normal floor, for
+/// [`Hypsometry::ocean_age_depth_r_normal_floor`].
+pub const NORMAL_FLOOR_MAX_LOAD_KM: f32 = 3.0;
+
 /// Area-weighted Pearson correlation of depth (−elevation) with √age over the oceanic samples of
 /// `crust` younger than [`AGE_DEPTH_MAX_AGE_MY`] with finite age and elevation; None when there
 /// are fewer than 10 such samples or either has no spread.
 pub fn age_depth_r(mesh: &SphereMesh, crust: &Crust) -> Option<f64> {
+    age_depth_r_where(mesh, crust, |_| true)
+}
+
+/// [`age_depth_r`] over the samples `i` for which `keep(i)` holds.
+pub fn age_depth_r_where(
+    mesh: &SphereMesh,
+    crust: &Crust,
+    keep: impl Fn(usize) -> bool,
+) -> Option<f64> {
     let (mut n, mut sw, mut sx, mut sy, mut sxx, mut syy, mut sxy) =
         (0usize, 0.0f64, 0.0, 0.0, 0.0, 0.0, 0.0);
     for i in 0..mesh.len().min(crust.len()) {
         let (age, z) = (crust.age_my[i], crust.elevation_km[i]);
         if crust.crust_type[i] != CrustType::Oceanic
+            || !keep(i)
             || !(0.0..AGE_DEPTH_MAX_AGE_MY).contains(&age)
             || !z.is_finite()
         {
@@ -232,6 +255,7 @@ pub fn hypsometry(mesh: &SphereMesh, crust: &Crust) -> Hypsometry {
         bands,
         quantiles_m,
         ocean_age_depth_r: age_depth_r(mesh, crust),
+        ocean_age_depth_r_normal_floor: None,
     }
 }
 

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::SphereMesh;
+use crate::io::hypsometry::Hypsometry;
 use crate::io::maps::{MapSample, SphereField};
 use crate::resources::{Crust, CrustType};
 use crate::simulation::Simulation;
@@ -48,7 +49,7 @@ pub struct Summary {
     /// Global resamplings performed.
     pub resamplings: u64,
     /// The relief against Earth's: bands, means, the ocean mode, the W1 gap.
-    pub hypsometry: crate::io::hypsometry::Hypsometry,
+    pub hypsometry: Hypsometry,
     /// Lakes and basins of the final surface (written by `generate`; absent from summaries
     /// made without a drainage network).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -108,9 +109,32 @@ pub fn summarize(sim: &Simulation, view: &Crust) -> Summary {
         elevation_m: elevation_summary(mesh, view),
         timings_ms,
         resamplings: sim.clock().resamplings,
-        hypsometry: crate::io::hypsometry::hypsometry(mesh, view),
+        hypsometry: Hypsometry {
+            ocean_age_depth_r_normal_floor: normal_floor_age_depth_r(sim),
+            ..crate::io::hypsometry::hypsometry(mesh, view)
+        },
         drainage: None,
     }
+}
+
+/// [`Hypsometry::ocean_age_depth_r_normal_floor`] of the live crust: its samples outside the
+/// trenches the isostasy cut this step, with at most
+/// [`crate::io::hypsometry::NORMAL_FLOOR_MAX_LOAD_KM`] over the normal oceanic thickness. None
+/// without the isostasy's trench field.
+fn normal_floor_age_depth_r(sim: &Simulation) -> Option<f64> {
+    let crust = sim.crust();
+    let state = sim
+        .world()
+        .get_resource::<crate::systems::relief::ReliefState>()?;
+    let trench = &state.trench_km;
+    if trench.len() != crust.len() {
+        return None;
+    }
+    let max_t = sim.params().init.oceanic_thickness_km as f32
+        + crate::io::hypsometry::NORMAL_FLOOR_MAX_LOAD_KM;
+    crate::io::hypsometry::age_depth_r_where(sim.mesh(), crust, |i| {
+        trench[i] <= 0.0 && crust.thickness_km[i] <= max_t
+    })
 }
 
 /// Samples a crust on the reference mesh at any direction (barycentric for scalars, nearest

@@ -39,6 +39,8 @@ pub mod stream {
     pub const RIFT: u64 = 5;
     /// Rifts asked for by commands (fragment centroids, divergence jitter).
     pub const RIFT_COMMAND: u64 = 6;
+    /// Impact craters of the initial planet (centres and radii).
+    pub const CRATER: u64 = 7;
     /// Noise fields (each field adds its own offset).
     pub const NOISE: u64 = 100;
 }

@@ -556,3 +556,72 @@ fn init_flag_picks_the_start_method() {
         "{err}"
     );
 }
+
+/// `--craters N` strikes N craters into the initial crust (the map changes; none is the
+/// default), and a smallest radius above the largest is refused with both keys named.
+/// Seen to fail with the flag parsed but not applied.
+#[test]
+fn craters_flag_scars_the_initial_planet() {
+    let run = |craters: Option<&str>| -> Vec<u8> {
+        let out = temp_dir(&format!("craters-{}", craters.unwrap_or("none")));
+        let dir = out.to_string_lossy().to_string();
+        let mut args = vec![
+            "generate",
+            "--quiet",
+            "--samples",
+            "3000",
+            "--plates",
+            "10",
+            "--my",
+            "0",
+            "--width",
+            "128",
+            "--backend",
+            "cpu",
+            "--out",
+            &dir,
+        ];
+        if let Some(c) = craters {
+            args.extend(["--craters", c]);
+        }
+        let o = planet().args(&args).output().expect("run planet generate");
+        assert!(
+            o.status.success(),
+            "generate --craters {craters:?} failed: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        std::fs::read(out.join("elevation16.png")).expect("elevation16.png")
+    };
+    let none = run(None);
+    assert_eq!(run(Some("0")), none, "craters are not off by default");
+    assert_ne!(run(Some("40")), none, "--craters 40 changed nothing");
+    let dir = temp_dir("craters-bad");
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("bad.toml");
+    std::fs::write(
+        &cfg,
+        "[init]\ncraters = 10\ncrater_min_radius_km = 900.0\ncrater_max_radius_km = 300.0\n",
+    )
+    .unwrap();
+    let o = planet()
+        .args([
+            "generate",
+            "--quiet",
+            "--samples",
+            "3000",
+            "--my",
+            "0",
+            "--config",
+        ])
+        .arg(&cfg)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .expect("run planet");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("init.crater_min_radius_km") && err.contains("init.crater_max_radius_km"),
+        "{err}"
+    );
+}

@@ -83,6 +83,10 @@ pub(crate) struct PlanetArgs {
     /// continental or oceanic). Sets `init.flood_fill`.
     #[arg(long)]
     pub(crate) init: Option<InitMethod>,
+    /// Impact craters struck into the initial crust (a late heavy bombardment; radii 200 to
+    /// 2,500 km by default). Sets `init.craters`.
+    #[arg(long)]
+    pub(crate) craters: Option<u64>,
     #[command(flatten)]
     pub(crate) switches: SwitchArgs,
     /// Worker threads (default: all cores). Results do not depend on it.
@@ -250,6 +254,9 @@ pub(crate) fn load_params(a: &PlanetArgs, base: Params) -> Result<Params> {
             "init.flood_fill",
             ParamValue::Bool(m == InitMethod::FloodFill),
         )?;
+    }
+    if let Some(c) = a.craters {
+        set(&mut params, "init.craters", ParamValue::Int(c))?;
     }
     params.validate()?;
     Ok(params)

@@ -403,6 +403,15 @@ pub fn initial_planet(mesh: &SphereMesh, params: &Params) -> (Crust, Vec<Initial
         });
     crust.orogeny.iter_mut().for_each(|o| *o = Orogeny::None);
     crust.plate.copy_from_slice(&plate);
+    if params.init.craters > 0 {
+        let b = crate::systems::craters::bombard(mesh, &mut crust, params);
+        tracing::debug!(
+            craters = b.craters,
+            removed_km3 = b.removed_km3,
+            deposited_km3 = b.deposited_km3,
+            "impact craters struck"
+        );
+    }
 
     let mut present = vec![false; n_plates];
     for &p in &plate {

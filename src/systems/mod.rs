@@ -2,6 +2,7 @@
 
 pub mod aging;
 pub mod convergence;
+pub mod craters;
 pub mod diagnostics;
 pub mod drift;
 pub mod erosion;

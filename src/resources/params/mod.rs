@@ -220,6 +220,10 @@ define_params! {
         oceanic_thickness_km: f64 = 7.0, 1.0..=100.0, "km", "Thickness of oceanic crust, initial and newly formed (Driftworld's basic thickness e_0).";
         flood_fill: bool = false, false..=true, "", "Start method: false = warped Voronoi plates with continents from a noise field; true = plates grown from their seed points over the sample graph (seed 003), in an order drawn from a noise field on positions (so every resolution grows the same plates), each plate continental or oceanic as a whole (plates in a random order are continental until continental_fraction of the area is). CLI: --init voronoi|flood-fill.";
         flood_fill_roughness: f64 = 1.0, 0.0..=5.0, "", "Flood fill: how much the growth speed varies from place to place (cost of a km = exp(roughness × noise)); 0 grows plain geodesic Voronoi cells, larger values more ragged plates.";
+        craters: u64 = 0, 0..=100000, "", "Impact craters struck into the initial crust (seed 004's late heavy bombardment; 0 = none). Each digs a bowl and throws the same volume out as an ejecta blanket beyond its rim; younger craters overprint older ones. CLI: --craters N.";
+        crater_min_radius_km: f64 = 200.0, 10.0..=5000.0, "km", "Smallest crater radius (seed 004: 200 km). Radii follow N(> R) ∝ R⁻² between the smallest and the largest.";
+        crater_max_radius_km: f64 = 2500.0, 10.0..=5000.0, "km", "Largest crater radius (seed 004: 2,500 km).";
+        crater_depth_ratio: f64 = 0.05, 0.0..=0.5, "fraction of radius", "Thickness of crust a crater's bowl removes at its centre, as a fraction of its radius (seed 004: 1/20), falling off as 1 − (r/R)² to the rim; at least 1 km of crust is left.";
     }
     /// Plate motion.
     [plates] Plates {
@@ -387,7 +391,8 @@ impl Params {
     /// `ocean.trench_elevation_km < ocean.abyssal_elevation_km < ocean.ridge_elevation_km < 0`,
     /// `resample.min_interval_steps <= resample.max_interval_steps`,
     /// `init.oceanic_elevation_km < init.continental_elevation_km <= continent.max_elevation_km`,
-    /// `subduction.control_distance_km < subduction.distance_km`.
+    /// `subduction.control_distance_km < subduction.distance_km`,
+    /// `init.crater_min_radius_km <= init.crater_max_radius_km`.
     pub fn validate(&self) -> Result<(), ParamError> {
         for (spec, bounds) in SCHEMA.iter().zip(BOUNDS) {
             if let Some(v) = self.get_field(spec.key) {
@@ -450,6 +455,12 @@ impl Params {
                 ("subduction.distance_km", self.subduction.distance_km),
                 true,
                 "subduction uplift peaks inside its reach (the distance transfer divides by (r_s - r_c)³)",
+            ),
+            (
+                ("init.crater_min_radius_km", self.init.crater_min_radius_km),
+                ("init.crater_max_radius_km", self.init.crater_max_radius_km),
+                false,
+                "the smallest crater cannot be larger than the largest",
             ),
         ];
         for ((lower_key, lower), (upper_key, upper), strict, why) in ordered {
@@ -939,7 +950,7 @@ mod tests {
     #[test]
     fn schema_is_consistent() {
         let schema = Params::schema();
-        assert_eq!(schema.len(), 90);
+        assert_eq!(schema.len(), 94);
         assert_eq!(schema.len(), BOUNDS.len());
         let mut seen = HashSet::new();
         for (spec, (lo, hi)) in schema.iter().zip(BOUNDS) {

@@ -92,7 +92,7 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
         false,
     )?;
     let t0 = Instant::now();
-    let mut sim = build_sim(&a.planet, params, plugins)?;
+    let mut sim = build_sim(&a.planet, params, plugins, None)?;
     use_backend(&mut sim, a.planet.backend)?;
     let build = t0.elapsed();
     let n = sim.mesh().len();

@@ -310,8 +310,12 @@ pub(crate) fn build_sim(
     a: &PlanetArgs,
     params: Params,
     plugins: PluginConfig,
+    start: Option<&StartMaps>,
 ) -> Result<Simulation> {
-    let mut sim = Simulation::new(params)?;
+    let mut sim = match start {
+        Some(s) => s.build(params)?,
+        None => Simulation::new(params)?,
+    };
     sim.apply_plugin_config(&plugins)
         .with_context(|| config_context(a.config.as_deref()))?;
     apply_switches(&mut sim, &a.switches.enable, &a.switches.disable)?;

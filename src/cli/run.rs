@@ -43,6 +43,126 @@ pub(crate) struct GenerateArgs {
     pub(crate) maps_every: Option<f64>,
     #[command(flatten)]
     pub(crate) extra: ExtraExports,
+    #[command(flatten)]
+    pub(crate) start: StartArgs,
+}
+
+/// Where a planet starts, when not from the parameters alone.
+#[derive(Args, Default)]
+pub(crate) struct StartArgs {
+    /// Start from this heightmap: a global equirectangular 16-bit grey PNG with its JSON sidecar
+    /// (as `generate` writes elevation16.png), or a GeoTIFF in EPSG:4326. Crust above
+    /// `init.map_continental_above_m` (−1,000 m) is continental.
+    #[arg(long, value_name = "FILE", conflicts_with = "from_earth")]
+    pub(crate) from_heightmap: Option<PathBuf>,
+    /// Start from today's Earth: ETOPO1 bedrock relief, Bird's PB2002 plates (the 27 larger
+    /// than 0.1% of the globe; smaller ones join a neighbour), NNR-MORVEL56 motions.
+    #[arg(long)]
+    pub(crate) from_earth: bool,
+    /// With --from-heightmap or --from-earth: the plates from this map (a global equirectangular
+    /// PNG, one flat colour per plate; plates are numbered in the order of their colours'
+    /// #rrggbb).
+    #[arg(long, value_name = "FILE")]
+    pub(crate) plates_map: Option<PathBuf>,
+    /// With --from-heightmap or --from-earth: Euler poles of some plates (TOML `[[plate]]`
+    /// tables: `plate` = number or `colour` = "#rrggbb", `pole_lat_deg`, `pole_lon_deg`,
+    /// `rate_deg_per_my`); the others move at random.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) motions: Option<PathBuf>,
+}
+
+/// Plates of today's Earth smaller than this fraction of the globe join a neighbour in
+/// `--from-earth` (they would be a few samples wide).
+pub(crate) const EARTH_MIN_PLATE_FRACTION: f64 = 0.001;
+
+/// The maps of [`StartArgs`], read and checked (before the planet is built).
+pub(crate) struct StartMaps {
+    elevation: Elevation,
+    plates: Option<tectonic_planets::io::start::PlateGrid>,
+    motions: Vec<(u32, tectonic_planets::components::PlateMotion)>,
+    min_plate_fraction: f64,
+}
+
+enum Elevation {
+    Grid(tectonic_planets::io::start::ElevationGrid),
+    Earth,
+}
+
+impl StartArgs {
+    /// Reads the maps; None for a planet from the parameters alone.
+    pub(crate) fn load(&self) -> Result<Option<StartMaps>> {
+        use tectonic_planets::io::start::{
+            earth_plates, load_heightmap, load_motions, load_plates_map,
+        };
+        let elevation = match (&self.from_heightmap, self.from_earth) {
+            (Some(p), _) => Elevation::Grid(load_heightmap(p)?),
+            (None, true) => Elevation::Earth,
+            (None, false) => {
+                if self.plates_map.is_some() || self.motions.is_some() {
+                    bail!("--plates-map and --motions go with --from-heightmap or --from-earth");
+                }
+                return Ok(None);
+            }
+        };
+        let (plates, mut motions, min_plate_fraction) = match &self.plates_map {
+            Some(p) => (Some(load_plates_map(p)?), Vec::new(), 0.0),
+            None if self.from_earth => {
+                let (grid, plates) = earth_plates();
+                let motions = plates
+                    .iter()
+                    .enumerate()
+                    .map(|(k, p)| (k as u32, p.motion))
+                    .collect();
+                (Some(grid), motions, EARTH_MIN_PLATE_FRACTION)
+            }
+            None => (None, Vec::new(), 0.0),
+        };
+        if let Some(m) = &self.motions {
+            let colours = plates.as_ref().map_or(&[][..], |p| &p.colours[..]);
+            for (k, motion) in load_motions(m, colours)? {
+                motions.retain(|(p, _)| *p != k);
+                motions.push((k, motion));
+            }
+        }
+        Ok(Some(StartMaps {
+            elevation,
+            plates,
+            motions,
+            min_plate_fraction,
+        }))
+    }
+}
+
+impl StartMaps {
+    /// The planet of these maps.
+    pub(crate) fn build(&self, params: Params) -> Result<Simulation> {
+        use tectonic_planets::io::start::earth_elevation_m;
+        use tectonic_planets::systems::init::MapStart;
+        let grid_elev;
+        let elevation: &(dyn Fn(glam::DVec3) -> f64 + Sync) = match &self.elevation {
+            Elevation::Grid(g) => {
+                grid_elev = move |d: glam::DVec3| g.at(d);
+                &grid_elev
+            }
+            Elevation::Earth => &earth_elevation_m,
+        };
+        let plate_fn;
+        let plates: Option<&(dyn Fn(glam::DVec3) -> u32 + Sync)> = match &self.plates {
+            Some(p) => {
+                plate_fn = move |d: glam::DVec3| p.at(d);
+                Some(&plate_fn)
+            }
+            None => None,
+        };
+        let r = params.planet.radius_km;
+        let start = MapStart {
+            elevation_m: elevation,
+            plates,
+            motions: &self.motions,
+            min_plate_area_km2: self.min_plate_fraction * 4.0 * std::f64::consts::PI * r * r,
+        };
+        Ok(Simulation::from_map(params, &start)?)
+    }
 }
 
 #[derive(Args)]
@@ -337,7 +457,8 @@ pub(crate) fn generate(a: GenerateArgs) -> Result<()> {
         }
         None => None,
     };
-    let mut sim = build_sim(&a.planet, params, plugins)?;
+    let start = a.start.load()?;
+    let mut sim = build_sim(&a.planet, params, plugins, start.as_ref())?;
     sim.world_mut()
         .resource_mut::<CommandHistory>()
         .record(0, command_line());

@@ -68,7 +68,7 @@ fn column(a: &BenchArgs, samples: u64) -> Result<Column> {
     let (params, plugins) = planet_params(&planet)?;
     let steps = steps_of(&params, RUN_MY);
     let t0 = Instant::now();
-    let mut sim = build_sim(&planet, params, plugins)?;
+    let mut sim = build_sim(&planet, params, plugins, None)?;
     use_backend(&mut sim, planet.backend)?;
     sim.run_steps(steps)?;
     let whole_s = t0.elapsed().as_secs_f64();

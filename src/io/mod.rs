@@ -11,4 +11,5 @@ pub mod maps;
 pub mod pending;
 pub mod rivers;
 pub mod save;
+pub mod start;
 pub mod summary;

@@ -116,13 +116,33 @@ impl Simulation {
     /// A new planet from `params` with the given plugin group (for example
     /// `TectonicPlugins.build().disable::<ErosionPlugin>().add(MyErosion)`).
     pub fn with_plugins(params: Params, plugins: impl PluginGroup) -> Result<Self, SimError> {
+        Self::build(params, plugins, |mesh, params| {
+            Ok(init::initial_planet(mesh, params))
+        })
+    }
+
+    /// A new planet whose initial crust and plates come from a map ([`init::planet_from_map`]:
+    /// `generate --from-heightmap`, `--from-earth`), with the built-in phenomena. Such a run is
+    /// not rebuilt by [`crate::commands::replay`], which starts from the parameters alone.
+    pub fn from_map(params: Params, start: &init::MapStart) -> Result<Self, SimError> {
+        Self::build(params, TectonicPlugins, |mesh, params| {
+            init::planet_from_map(mesh, params, start)
+                .map_err(|e| SimError::BadArgument(e.to_string()))
+        })
+    }
+
+    fn build(
+        params: Params,
+        plugins: impl PluginGroup,
+        initial: impl FnOnce(&SphereMesh, &Params) -> Result<(Crust, Vec<init::InitialPlate>), SimError>,
+    ) -> Result<Self, SimError> {
         params.validate()?;
         let mut timings = StepTimings::default();
         let t0 = Instant::now();
         let mesh = init::reference_mesh(&params)?;
         timings.record("mesh", t0.elapsed());
         let t1 = Instant::now();
-        let (crust, plates) = init::initial_planet(&mesh, &params);
+        let (crust, plates) = initial(&mesh, &params)?;
         let next_id = plates.iter().map(|p| p.id.0 + 1).max().unwrap_or(0);
 
         let mut app = App::empty();

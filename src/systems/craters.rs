@@ -18,15 +18,17 @@
 //! crater from the seed, never per sample, so every resolution gets the same craters.
 //!
 //! The pass changes the thickness; the elevation follows it by local Airy isostasy (continents by
-//! `1 − ρ_c/ρ_m` per km of crust, with the water load below sea level; ocean floor by the
-//! oceanic load gain), the same laws the isostasy phenomenon then keeps.
+//! the isostasy's law, with the water load below sea level; ocean floor by the oceanic load
+//! gain), the same laws the isostasy phenomenon then keeps.
 
 use glam::DVec3;
 
 use crate::geometry::SphereMesh;
 use crate::random::{hash3, stream, unit_f64, unit_vector};
-use crate::resources::params::{Params, dry_isostatic_gain, oceanic_load_gain};
+use crate::resources::params::{Params, oceanic_load_gain};
 use crate::resources::{Crust, CrustType};
+use crate::systems::relief::isostasy::{IsostasyParams, airy_elevation, airy_thickness};
+use crate::systems::relief::isostasy_params;
 
 /// The thinnest crust a crater leaves, km.
 pub const MIN_CRUST_KM: f64 = 1.0;
@@ -112,23 +114,17 @@ pub struct CraterScratch {
     cap: Vec<(u32, f64)>,
 }
 
-/// Elevation response to a thickness change `dt_km` of a sample at `z_km` (local Airy).
-#[derive(Clone, Copy, Debug)]
+/// Elevation response to a thickness change (local Airy): continents by the isostasy's own law
+/// ([`airy_thickness`] then [`airy_elevation`]), ocean floor by the oceanic load gain.
 struct Response {
-    /// Surface rise per km of continental crust above sea level.
-    continental: f64,
-    /// Factor from a dry surface below sea level to the water-loaded one, ρ_m/(ρ_m − ρ_w).
-    water: f64,
-    /// Sea-floor rise per km of oceanic crust.
+    iso: IsostasyParams,
     oceanic: f64,
 }
 
 impl Response {
     fn of(params: &Params) -> Self {
-        let rho_m = params.isostasy.mantle_density_g_per_cm3;
         Self {
-            continental: dry_isostatic_gain(params),
-            water: rho_m / (rho_m - 1.03).max(1e-6),
+            iso: isostasy_params(params),
             oceanic: oceanic_load_gain(params),
         }
     }
@@ -138,9 +134,7 @@ impl Response {
         if ct == CrustType::Oceanic {
             return (z + self.oceanic * dt_km) as f32;
         }
-        let dry = if z >= 0.0 { z } else { z / self.water };
-        let dry = dry + self.continental * dt_km;
-        (if dry >= 0.0 { dry } else { dry * self.water }) as f32
+        airy_elevation(airy_thickness(z, &self.iso) + dt_km, &self.iso) as f32
     }
 }
 

@@ -435,3 +435,257 @@ pub fn initial_planet(mesh: &SphereMesh, params: &Params) -> (Crust, Vec<Initial
     }
     (crust, plates)
 }
+
+/// What a start from a map gives: the elevation everywhere, and optionally the plates and some
+/// of their motions (see [`planet_from_map`]).
+pub struct MapStart<'a> {
+    /// Elevation (m) at a world unit direction.
+    pub elevation_m: &'a (dyn Fn(DVec3) -> f64 + Sync),
+    /// Plate index at a world unit direction; None draws the plates as a new planet does
+    /// (Voronoi or flood fill, `init.flood_fill`).
+    pub plates: Option<&'a (dyn Fn(DVec3) -> u32 + Sync)>,
+    /// Motions of some plates by index; the others get a random motion (as a new planet's).
+    pub motions: &'a [(u32, PlateMotion)],
+    /// Plates of the map smaller than this (km²) join the neighbouring plate they share most
+    /// edges with (0 keeps every plate that covers a sample).
+    pub min_plate_area_km2: f64,
+}
+
+/// Why a map cannot start a planet.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum MapStartError {
+    /// No sample of the map lies above sea level.
+    #[error(
+        "the map has no land: every sample lies at or below sea level (lowest {min_m:.0} m, highest {max_m:.0} m)"
+    )]
+    AllOcean {
+        /// Lowest elevation sampled, m.
+        min_m: f64,
+        /// Highest elevation sampled, m.
+        max_m: f64,
+    },
+    /// An elevation is not a finite number.
+    #[error(
+        "the map holds an elevation that is not a number at latitude {lat:.2}°, longitude {lon:.2}°"
+    )]
+    NotFinite {
+        /// Latitude, degrees.
+        lat: f64,
+        /// Longitude, degrees.
+        lon: f64,
+    },
+    /// More plates than the parameters allow.
+    #[error("the plates map has {plates} plates; at most {max} fit {samples} samples")]
+    TooManyPlates {
+        /// Plates in the map.
+        plates: usize,
+        /// The most allowed.
+        max: usize,
+        /// Samples.
+        samples: u64,
+    },
+    /// A motion names a plate the map does not have.
+    #[error("a motion is given for plate {plate}, but the plates are numbered 0 to {last}")]
+    UnknownPlate {
+        /// The plate asked for.
+        plate: u32,
+        /// The last plate.
+        last: u32,
+    },
+}
+
+/// Oldest age (My) a start from a map gives ocean floor (floor deeper than the age–depth law
+/// reaches at this age is this old and thinner than normal).
+pub const MAP_OLDEST_FLOOR_MY: f64 = 180.0;
+
+/// The age (My) at which bare ocean floor reaches `z_km` under the parameters' age–depth law
+/// (0 above the ridge, [`MAP_OLDEST_FLOOR_MY`] below the law's depth at that age): bisection on
+/// the monotone law.
+pub fn age_of_floor_my(z_km: f64, params: &Params) -> f64 {
+    use crate::systems::relief::isostasy::ocean_floor_km;
+    if z_km >= ocean_floor_km(0.0, params) {
+        return 0.0;
+    }
+    if z_km <= ocean_floor_km(MAP_OLDEST_FLOOR_MY, params) {
+        return MAP_OLDEST_FLOOR_MY;
+    }
+    let (mut lo, mut hi) = (0.0, MAP_OLDEST_FLOOR_MY);
+    for _ in 0..50 {
+        let mid = 0.5 * (lo + hi);
+        if ocean_floor_km(mid, params) > z_km {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// Gives the samples of every plate smaller than `min_area_km2` to the larger plate most of
+/// their neighbours belong to (in passes over the samples in order, until none is left; a
+/// small plate with no larger neighbour keeps its samples).
+fn merge_small_plates(mesh: &SphereMesh, plate: &mut [u32], n_plates: usize, min_area_km2: f64) {
+    let mut area = vec![0.0f64; n_plates];
+    for (i, &p) in plate.iter().enumerate() {
+        if (p as usize) < n_plates {
+            area[p as usize] += mesh.area_km2[i];
+        }
+    }
+    let small = |p: u32| (p as usize) < n_plates && area[p as usize] < min_area_km2;
+    let mut counts: Vec<(u32, u32)> = Vec::new();
+    loop {
+        let mut changed = false;
+        for i in 0..plate.len() {
+            if !small(plate[i]) {
+                continue;
+            }
+            counts.clear();
+            for &j in mesh.neighbors_of(i) {
+                let q = plate[j as usize];
+                if q == NO_PLATE || small(q) {
+                    continue;
+                }
+                match counts.iter_mut().find(|c| c.0 == q) {
+                    Some(c) => c.1 += 1,
+                    None => counts.push((q, 1)),
+                }
+            }
+            if let Some(&(q, _)) = counts
+                .iter()
+                .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+            {
+                plate[i] = q;
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+}
+
+/// A planet started from a map (paper §7.1): each sample takes the map's elevation; crust above
+/// `init.map_continental_above_m` is continental, with the thickness that stands at that
+/// elevation under Airy isostasy; the rest is ocean floor of the age whose depth the age–depth
+/// law gives (shallower floor is young floor under a load, deeper floor old floor thinned), with
+/// the thickness that keeps its elevation. Plates come from `start.plates` (then made whole:
+/// pieces cut off from their plate join a neighbour) or are drawn as for a new planet; motions
+/// from `start.motions`, random for the plates it does not name.
+pub fn planet_from_map(
+    mesh: &SphereMesh,
+    params: &Params,
+    start: &MapStart,
+) -> Result<(Crust, Vec<InitialPlate>), MapStartError> {
+    use crate::geometry::to_lat_lon_deg;
+    use crate::systems::relief::isostasy::{airy_thickness, ocean_floor_km};
+    let n = mesh.len();
+    let elevation: Vec<f64> = mesh
+        .positions
+        .par_iter()
+        .with_min_len(1024)
+        .map(|&p| (start.elevation_m)(p))
+        .collect();
+    if let Some(i) = elevation.iter().position(|z| !z.is_finite()) {
+        let (lat, lon) = to_lat_lon_deg(mesh.positions[i]);
+        return Err(MapStartError::NotFinite { lat, lon });
+    }
+    let (min_m, max_m) = elevation
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &z| {
+            (a.min(z), b.max(z))
+        });
+    if max_m <= 0.0 {
+        return Err(MapStartError::AllOcean { min_m, max_m });
+    }
+    // Plates.
+    let n_plates;
+    let mut plate: Vec<u32> = match start.plates {
+        Some(f) => {
+            let plate: Vec<u32> = mesh.positions.par_iter().map(|&p| f(p)).collect();
+            n_plates = plate.iter().map(|&p| p as usize + 1).max().unwrap_or(0);
+            let max = (params.planet.samples / 20).max(1) as usize;
+            if n_plates > max {
+                return Err(MapStartError::TooManyPlates {
+                    plates: n_plates,
+                    max,
+                    samples: params.planet.samples,
+                });
+            }
+            plate
+        }
+        None => {
+            n_plates = params.init.plates as usize;
+            let seed = params.planet.seed;
+            let centroids: Vec<DVec3> = (0..n_plates as u64)
+                .map(|i| plate_centroid(seed, i))
+                .collect();
+            if params.init.flood_fill {
+                flood_fill_start(mesh, params, &centroids, 0.0).0
+            } else {
+                voronoi_start(mesh, params, &centroids, 0.0).0
+            }
+        }
+    };
+    let mut unused = n_plates as u32;
+    defragment_plates(mesh, &mut plate, f64::INFINITY, false, &mut unused);
+    if start.min_plate_area_km2 > 0.0 {
+        merge_small_plates(mesh, &mut plate, n_plates, start.min_plate_area_km2);
+    }
+    if let Some(&(p, _)) = start.motions.iter().find(|(p, _)| *p as usize >= n_plates) {
+        return Err(MapStartError::UnknownPlate {
+            plate: p,
+            last: n_plates.saturating_sub(1) as u32,
+        });
+    }
+    // Crust.
+    let iso = crate::systems::relief::isostasy_params(params);
+    let threshold_km = params.init.map_continental_above_m * 1e-3;
+    let t_oc = params.init.oceanic_thickness_km;
+    let load_gain = crate::resources::params::oceanic_load_gain(params);
+    let mut crust = Crust::with_len(n);
+    crust
+        .elevation_km
+        .par_iter_mut()
+        .zip(crust.crust_type.par_iter_mut())
+        .zip(crust.thickness_km.par_iter_mut())
+        .zip(crust.age_my.par_iter_mut())
+        .zip(elevation.par_iter())
+        .with_min_len(1024)
+        .for_each(|((((z, ct), t), age), &zm)| {
+            let zk = zm * 1e-3;
+            *z = zk as f32;
+            if zk > threshold_km {
+                *ct = CrustType::Continental;
+                *t = airy_thickness(zk, &iso).max(5.0) as f32;
+                *age = 1000.0;
+            } else {
+                *ct = CrustType::Oceanic;
+                let a = age_of_floor_my(zk, params);
+                // What the law does not explain is a load (above it) or a thinner crust (below).
+                let off = zk - ocean_floor_km(a, params);
+                *age = a as f32;
+                *t = (t_oc + off / load_gain).max(1.0) as f32;
+            }
+        });
+    crust.orogeny.iter_mut().for_each(|o| *o = Orogeny::None);
+    crust.plate.copy_from_slice(&plate);
+    let mut present = vec![false; n_plates];
+    for &p in &plate {
+        if p != NO_PLATE {
+            present[p as usize] = true;
+        }
+    }
+    let plates = (0..n_plates)
+        .filter(|&k| present[k])
+        .map(|k| InitialPlate {
+            id: PlateId(k as u32),
+            motion: start
+                .motions
+                .iter()
+                .find(|(p, _)| *p as usize == k)
+                .map(|&(_, m)| m)
+                .unwrap_or_else(|| plate_motion(params, k as u64)),
+        })
+        .collect();
+    Ok((crust, plates))
+}

@@ -223,6 +223,7 @@ define_params! {
         craters: u64 = 0, 0..=100000, "", "Impact craters struck into the initial crust (seed 004's late heavy bombardment; 0 = none). Each digs a bowl and throws the same volume out as an ejecta blanket beyond its rim; younger craters overprint older ones. CLI: --craters N.";
         crater_min_radius_km: f64 = 200.0, 10.0..=5000.0, "km", "Smallest crater radius (seed 004: 200 km). Radii follow N(> R) ∝ R⁻² between the smallest and the largest.";
         crater_max_radius_km: f64 = 2500.0, 10.0..=5000.0, "km", "Largest crater radius (seed 004: 2,500 km).";
+        map_continental_above_m: f64 = -1000.0, -11000.0..=9000.0, "m", "In a start from a map (--from-heightmap, --from-earth): crust above this elevation is continental, below it oceanic (-1,000 m keeps the continental shelves and the upper slopes continental; Earth's continent-ocean boundary lies near the foot of the slope, -2,000 to -3,000 m, our age-depth law reaches -2,600 m at the ridge).";
         crater_depth_ratio: f64 = 0.05, 0.0..=0.5, "fraction of radius", "Thickness of crust a crater's bowl removes at its centre, as a fraction of its radius (seed 004: 1/20), falling off as 1 − (r/R)² to the rim; at least 1 km of crust is left.";
     }
     /// Plate motion.
@@ -950,7 +951,7 @@ mod tests {
     #[test]
     fn schema_is_consistent() {
         let schema = Params::schema();
-        assert_eq!(schema.len(), 94);
+        assert_eq!(schema.len(), 95);
         assert_eq!(schema.len(), BOUNDS.len());
         let mut seen = HashSet::new();
         for (spec, (lo, hi)) in schema.iter().zip(BOUNDS) {

@@ -399,3 +399,51 @@ fn default_planet_over_1000_my_keeps_its_continents() {
         }
     }
 }
+
+/// With `plates.momentum`, a collision slows the converging plates (the terrane's momentum goes
+/// to the plate it joins and the collision exchanges an impulse); without it, they plough on.
+#[test]
+fn colliding_continents_slow_down_with_momentum() {
+    let centre = tectonic_planets::geometry::from_lat_lon_deg(-25.0, 90.0);
+    let south = move |q: DVec3| {
+        if angle_between(q, centre) < 12f64.to_radians() {
+            continent(0.5)
+        } else {
+            ocean(-4.5, 100.0)
+        }
+    };
+    let closing = |momentum: bool| -> (f64, f64) {
+        let mut sim = two_hemispheres(40_000, DVec3::X, 100.0, |_| continent(0.5), south);
+        sim.world_mut().resource_mut::<Params>().plates.momentum = momentum;
+        let speed = |sim: &mut Simulation| {
+            let world = sim.world_mut();
+            let mut q = world.query::<(&Plate, &PlateMotion)>();
+            let m: Vec<(u32, PlateMotion)> = q.iter(world).map(|(p, m)| (p.id.0, *m)).collect();
+            let of = |id: u32| m.iter().find(|x| x.0 == id).map(|x| x.1).unwrap();
+            // Closing speed at the front (longitude 90° on the equator), mm/yr.
+            let front = DVec3::Y;
+            (of(1).velocity_km_per_my(front, R) - of(0).velocity_km_per_my(front, R)).length()
+        };
+        let before = speed(&mut sim);
+        for _ in 0..60 {
+            sim.step().unwrap();
+            if sim.world().resource::<Sutures>().total > 0 {
+                break;
+            }
+        }
+        assert!(sim.world().resource::<Sutures>().total > 0, "no collision");
+        (before, speed(&mut sim))
+    };
+    let (b0, a0) = closing(false);
+    let (b1, a1) = closing(true);
+    eprintln!(
+        "closing speed at the front: kinematic {b0:.1} → {a0:.1} mm/yr, momentum {b1:.1} → {a1:.1} mm/yr"
+    );
+    // (Slab pull turns the pole a little, at constant speed.)
+    assert!(
+        (a0 - b0).abs() < 0.05 * b0,
+        "kinematic: {b0:.3} → {a0:.3} mm/yr"
+    );
+    assert!(a1 < 0.6 * b1, "with momentum: {b1:.2} → {a1:.2} mm/yr");
+    assert!(a1 > 0.0, "the plates locked completely");
+}

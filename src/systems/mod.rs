@@ -7,6 +7,7 @@ pub mod diagnostics;
 pub mod drift;
 pub mod erosion;
 pub mod init;
+pub mod momentum;
 pub mod oceanic_crust;
 pub mod relief;
 pub mod resample;

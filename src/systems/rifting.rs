@@ -350,6 +350,35 @@ pub fn rift_plate(
             angular_speed_rad_per_my: speed,
         });
     }
+    if params.plates.momentum {
+        // The fragments push apart without the plate as a whole gaining momentum.
+        use crate::systems::momentum::{inertia, motion_of, omega, rift_correction, sample_mass};
+        let mesh = world.resource::<SphereMesh>();
+        let crust = world.resource::<Crust>();
+        let inertias: Vec<glam::DMat3> = order
+            .iter()
+            .map(|&l| {
+                inertia(
+                    samples
+                        .iter()
+                        .zip(&labels)
+                        .filter(|&(_, &ls)| ls as usize == l)
+                        .map(|(&s, _)| {
+                            let s = s as usize;
+                            (
+                                world_from_plate * mesh.positions[s],
+                                sample_mass(crust.crust_type[s], mesh.area_km2[s], &params),
+                            )
+                        }),
+                )
+            })
+            .collect();
+        let mut omegas: Vec<DVec3> = motions.iter().map(omega).collect();
+        rift_correction(&inertias, &mut omegas, omega_parent);
+        for (m, w) in motions.iter_mut().zip(omegas) {
+            *m = motion_of(w, m.euler_pole);
+        }
+    }
     world.entity_mut(entity).insert(motions[0]);
     for (rank, &id) in ids.iter().enumerate().skip(1) {
         world

@@ -230,6 +230,8 @@ define_params! {
     [plates] Plates {
         max_speed_mm_per_yr: f64 = 100.0, 1.0..=1000.0, "mm/yr", "Maximum plate surface speed v0 (paper Appendix A).";
         min_speed_fraction: f64 = 0.1, 0.0..=1.0, "fraction of v0", "Initial plate speeds are drawn uniformly between this fraction of v0 and v0.";
+        momentum: bool = false, false..=true, "", "Plates carry angular momentum (mass from area and crust thickness, seed 004): a sutured terrane takes its momentum to the plate it joins, a collision exchanges momentum between the two plates, a rift's fragments keep the parent's total. Off: purely kinematic motions (the paper's).";
+        collision_coupling: f64 = 0.5, 0.0..=1.0, "", "With plates.momentum: the fraction of the two plates' relative angular velocity a collision (suture) takes away (0: only the terrane's momentum moves; 1: the plates lock together).";
     }
     /// Oceanic crust.
     [ocean] Ocean {
@@ -951,7 +953,7 @@ mod tests {
     #[test]
     fn schema_is_consistent() {
         let schema = Params::schema();
-        assert_eq!(schema.len(), 95);
+        assert_eq!(schema.len(), 97);
         assert_eq!(schema.len(), BOUNDS.len());
         let mut seen = HashSet::new();
         for (spec, (lo, hi)) in schema.iter().zip(BOUNDS) {

@@ -168,6 +168,66 @@ pub fn collide_before_resample(inputs: CollisionInputs, mut sutures: ResMut<Sutu
     inputs.find(0.0, 0.0, &mut sutures);
 }
 
+/// Plate momentum at the sutures just applied (see [`crate::systems::momentum`]): each terrane
+/// takes its momentum to the plate it joined, and the two plates exchange the collision's
+/// impulse. Runs right after the resampling, when every frame is the identity.
+fn exchange_momentum(world: &mut World, applied: &[(Suture, Vec<u32>)], params: &Params) {
+    use crate::systems::momentum::{inertia, motion_of, omega, sample_mass, suture_exchange};
+    // Inertia of the samples of `plate` and of the listed ones.
+    let inertia_of = |world: &World, plate: Option<u32>, list: &[u32]| {
+        let (mesh, crust) = (world.resource::<SphereMesh>(), world.resource::<Crust>());
+        let n = mesh.len().min(crust.len());
+        let point = |i: usize| {
+            (
+                mesh.positions[i],
+                sample_mass(crust.crust_type[i], mesh.area_km2[i], params),
+            )
+        };
+        match plate {
+            Some(p) => inertia((0..n).filter(|&i| crust.plate[i] == p).map(point)),
+            None => inertia(
+                list.iter()
+                    .map(|&j| j as usize)
+                    .filter(|&j| j < n)
+                    .map(point),
+            ),
+        }
+    };
+    for (suture, samples) in applied {
+        if samples.is_empty() || suture.from_plate == suture.to_plate {
+            continue;
+        }
+        let (a, b) = (suture.from_plate, suture.to_plate);
+        let motion = |world: &mut World, id: u32| {
+            let mut q = world.query::<(&Plate, &PlateMotion)>();
+            q.iter(world).find(|(p, _)| p.id.0 == id).map(|(_, m)| *m)
+        };
+        let (Some(ma), Some(mb)) = (motion(world, a), motion(world, b)) else {
+            continue;
+        };
+        let i_t = inertia_of(world, None, samples);
+        let i_a = inertia_of(world, Some(a), &[]);
+        let i_b = inertia_of(world, Some(b), &[]);
+        let (wa, wb) = suture_exchange(
+            i_a,
+            i_b,
+            i_t,
+            omega(&ma),
+            omega(&mb),
+            params.plates.collision_coupling,
+        );
+        let mut q = world.query::<(&Plate, &mut PlateMotion)>();
+        for (p, mut m) in q.iter_mut(world) {
+            if p.id.0 == a {
+                *m = motion_of(wa, ma.euler_pole);
+            } else if p.id.0 == b {
+                *m = motion_of(wb, mb.euler_pole);
+            }
+        }
+        tracing::debug!(from = a, to = b, "suture: plate momentum exchanged");
+    }
+}
+
 /// After a resampling that applied sutures: the collision surge around each sutured terrane.
 pub fn collision_uplift(world: &mut World) {
     let applied = std::mem::take(&mut world.resource_mut::<Sutures>().applied);
@@ -179,6 +239,9 @@ pub fn collision_uplift(world: &mut World) {
         return;
     }
     let params = world.resource::<Params>().clone();
+    if params.plates.momentum {
+        exchange_momentum(world, &applied, &params);
+    }
     let isostatic = world
         .get_resource::<crate::resources::ReliefMode>()
         .is_some_and(|m| m.isostatic);

@@ -447,3 +447,88 @@ fn colliding_continents_slow_down_with_momentum() {
     assert!(a1 < 0.6 * b1, "with momentum: {b1:.2} → {a1:.2} mm/yr");
     assert!(a1 > 0.0, "the plates locked completely");
 }
+
+/// An island arc (thick oceanic crust) carried into a continent docks onto it: at the next
+/// resampling it joins the continent's plate as continental crust, and the continental area
+/// grows by the arc's area. With docking off it is forced under and the area stays.
+#[test]
+fn an_arc_driven_into_a_continent_docks() {
+    // Far enough south that the first resampling (step 10), which makes it a terrane, comes
+    // before it reaches the front.
+    let centre = tectonic_planets::geometry::from_lat_lon_deg(-35.0, 90.0);
+    let arc_radius = 8f64.to_radians();
+    let run = |docking: bool| -> (f64, f64, f64) {
+        let mut sim = two_hemispheres(
+            100_000,
+            DVec3::X,
+            100.0,
+            |_| continent(0.5),
+            |_| ocean(-4.5, 60.0),
+        );
+        sim.world_mut().resource_mut::<Params>().collision.docking = docking;
+        // Nothing else turns ocean into continent: no welding of trapped ocean.
+        sim.world_mut()
+            .resource_mut::<Params>()
+            .collision
+            .trapped_ocean_km2 = 0.0;
+        // No sediment: trench fill would make thick oceanic crust (an accretionary wedge, which
+        // docks too) besides the arc.
+        for name in ["drainage", "rivers", "coasts", "sediment"] {
+            sim.set_enabled(name, false).unwrap();
+        }
+        let mesh = sim.mesh().clone();
+        let mut arc_area = 0.0;
+        {
+            let mut crust = sim.world_mut().resource_mut::<Crust>();
+            for i in 0..mesh.len() {
+                if angle_between(mesh.positions[i], centre) < arc_radius {
+                    crust.thickness_km[i] = 40.0;
+                    crust.elevation_km[i] = -0.5;
+                    arc_area += mesh.area_km2[i];
+                }
+            }
+        }
+        let _ = arc_area;
+        // The terranes (and so the arc) are rebuilt at each resampling: the arc as the model
+        // carries it is its terrane (its rim, smoothed by the resamplings, counts where at
+        // least `collision.arc_min_thickness_km` thick).
+        let area0 = continental_area(&mesh, sim.crust());
+        let mut arc_terrane = 0.0f64;
+        for _ in 0..45 {
+            sim.step().unwrap();
+            let t = sim
+                .world()
+                .resource::<tectonic_planets::resources::TerraneField>();
+            let crust = sim.crust();
+            let arcs: f64 = (0..t.area_km2.len())
+                .filter(|&k| {
+                    t.terrane
+                        .iter()
+                        .position(|&x| x as usize == k)
+                        .is_some_and(|i| crust.crust_type[i] == CrustType::Oceanic)
+                })
+                .map(|k| t.area_km2[k])
+                .sum();
+            arc_terrane = arc_terrane.max(arcs);
+        }
+        (area0, continental_area(&mesh, sim.crust()), arc_terrane)
+    };
+    let (b0, b1, _) = run(false);
+    let (a0, a1, arc) = run(true);
+    // The same run without docking drifts a little (the resamplings move the coasts by a
+    // fraction of a sample); docking adds the arc to that.
+    let gain = (a1 - a0) - (b1 - b0);
+    eprintln!(
+        "continental area: without docking {b0:.4e} → {b1:.4e} km², with {a0:.4e} → {a1:.4e} km²; gain {gain:.4e} km², arc {arc:.4e} km²"
+    );
+    assert!(arc > 1e6, "the arc was not a terrane: {arc:.3e} km²");
+    assert!(
+        (gain - arc).abs() <= 0.05 * arc,
+        "docking added {gain:.4e} km² of continent, the arc covers {arc:.4e} km²"
+    );
+    assert!(
+        (b1 - b0).abs() < 0.2 * arc,
+        "without docking the area changed by {:.4e} km²",
+        b1 - b0
+    );
+}

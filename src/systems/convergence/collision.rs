@@ -23,6 +23,11 @@ use crate::resources::{
 /// Finds terranes colliding now: continental crust of a subducting plate more than
 /// `threshold_km` past a front whose overriding crust is continental too. Queues a suture for
 /// the smaller terrane of each pair in contact and asks for a resampling.
+///
+/// Docking (`collision.docking`): an island arc (an arc terrane, oceanic) or a microcontinent
+/// (smaller than `collision.min_terrane_km2`) in contact with a continent at least that large
+/// docks onto it: its suture is queued only by the check just before a resampling
+/// (`threshold_km` = 0), so docking never forces a resampling of its own.
 #[allow(clippy::too_many_arguments)]
 pub fn find_collisions(
     threshold_km: f64,
@@ -41,14 +46,17 @@ pub fn find_collisions(
     {
         return false;
     }
-    let mut contacts: Vec<(u32, u32, u32, u32)> = (0..crust.len())
+    let mut contacts: Vec<(bool, u32, u32, u32, u32)> = (0..crust.len())
         .into_par_iter()
         .with_min_len(4096)
         .filter_map(|i| {
             let k = field.subducting_point[i];
-            if k == NONE || crust.crust_type[i] != CrustType::Continental {
+            let tb = terranes.terrane[i];
+            if k == NONE || tb == NONE {
                 return None;
             }
+            // An arc terrane's samples are oceanic (continental terranes' are continental).
+            let arc = crust.crust_type[i] != CrustType::Continental;
             let k = k as usize;
             // Where the crust will be after `lookahead_my` more of convergence (the collision
             // check at the start of a step looks one step ahead, as Driftworld does, so that the
@@ -63,30 +71,37 @@ pub fn find_collisions(
             if crust.crust_type[os] != CrustType::Continental {
                 return None;
             }
-            let (tb, ta) = (terranes.terrane[i], terranes.terrane[os]);
-            if tb == NONE || ta == NONE {
+            let ta = terranes.terrane[os];
+            if ta == NONE {
                 return None;
             }
             let min_area = params.collision.min_terrane_km2;
-            if terranes.area_km2[tb as usize] < min_area
-                || terranes.area_km2[ta as usize] < min_area
-            {
-                return None;
+            let (small_b, small_a) = (
+                terranes.area_km2[tb as usize] < min_area,
+                terranes.area_km2[ta as usize] < min_area,
+            );
+            if arc || small_b || small_a {
+                // Docking: onto a continent at least `min_area` large, at the resampling only.
+                let receiver_small = if arc { small_a } else { small_a && small_b };
+                if !params.collision.docking || receiver_small || threshold_km > 0.0 {
+                    return None;
+                }
             }
-            Some((tb, ta, fp.subducting[k], fp.overriding[k]))
+            Some((arc, tb, ta, fp.subducting[k], fp.overriding[k]))
         })
         .collect();
     contacts.sort_unstable();
     contacts.dedup();
     let r_km = params.planet.radius_km;
     let mut any = false;
-    for (tb, ta, plate_b, plate_a) in contacts {
-        let (moving, from, to) = if terranes.area_km2[ta as usize] < terranes.area_km2[tb as usize]
-        {
-            (ta, plate_a, plate_b)
-        } else {
-            (tb, plate_b, plate_a)
-        };
+    for (arc, tb, ta, plate_b, plate_a) in contacts {
+        // An arc always moves; otherwise the smaller terrane does.
+        let (moving, from, to) =
+            if !arc && terranes.area_km2[ta as usize] < terranes.area_km2[tb as usize] {
+                (ta, plate_a, plate_b)
+            } else {
+                (tb, plate_b, plate_a)
+            };
         if sutures.pending.iter().any(|s| s.terrane == moving) {
             continue;
         }
@@ -168,12 +183,53 @@ pub fn collide_before_resample(inputs: CollisionInputs, mut sutures: ResMut<Sutu
     inputs.find(0.0, 0.0, &mut sutures);
 }
 
+/// Docked island arcs become continental crust of the plate they joined, at their elevation
+/// (the thickness that stands there under Airy isostasy, at least the arc's own).
+fn dock_arcs(world: &mut World, applied: &[(Suture, Vec<u32>)], params: &Params) {
+    use crate::gpu::FieldMask;
+    if !params.collision.docking {
+        return;
+    }
+    let arcs: Vec<u32> = {
+        let crust = world.resource::<Crust>();
+        applied
+            .iter()
+            .flat_map(|(_, s)| s.iter().copied())
+            .filter(|&j| crust.crust_type.get(j as usize) == Some(&CrustType::Oceanic))
+            .collect()
+    };
+    if arcs.is_empty() {
+        return;
+    }
+    if !crate::gpu::sync_crust_to_host_or_record(world, FieldMask::ELEVATION | FieldMask::THICKNESS)
+    {
+        return;
+    }
+    let iso = crate::systems::relief::isostasy_params(params);
+    crate::gpu::write_crust_fields_or_record(
+        world,
+        FieldMask::CRUST_TYPE | FieldMask::THICKNESS,
+        |crust| {
+            for &j in &arcs {
+                let j = j as usize;
+                let t = crate::systems::relief::isostasy::airy_thickness(
+                    crust.elevation_km[j] as f64,
+                    &iso,
+                );
+                crust.crust_type[j] = CrustType::Continental;
+                crust.thickness_km[j] = (t as f32).max(crust.thickness_km[j]);
+            }
+        },
+    );
+    tracing::debug!(samples = arcs.len(), "island arcs docked");
+}
+
 /// Plate momentum at the sutures just applied (see [`crate::systems::momentum`]): each terrane
 /// takes its momentum to the plate it joined, and the two plates exchange the collision's
 /// impulse. Runs right after the resampling, when every frame is the identity.
 fn exchange_momentum(world: &mut World, applied: &[(Suture, Vec<u32>)], params: &Params) {
     use crate::systems::momentum::{inertia, motion_of, omega, sample_mass, suture_exchange};
-    // Inertia of the samples of `plate` and of the listed ones.
+    // Inertia of the listed samples, and of the samples of `plate` not listed.
     let inertia_of = |world: &World, plate: Option<u32>, list: &[u32]| {
         let (mesh, crust) = (world.resource::<SphereMesh>(), world.resource::<Crust>());
         let n = mesh.len().min(crust.len());
@@ -184,7 +240,17 @@ fn exchange_momentum(world: &mut World, applied: &[(Suture, Vec<u32>)], params: 
             )
         };
         match plate {
-            Some(p) => inertia((0..n).filter(|&i| crust.plate[i] == p).map(point)),
+            Some(p) => {
+                let mut listed = vec![false; n];
+                list.iter()
+                    .filter(|&&j| (j as usize) < n)
+                    .for_each(|&j| listed[j as usize] = true);
+                inertia(
+                    (0..n)
+                        .filter(|&i| crust.plate[i] == p && !listed[i])
+                        .map(point),
+                )
+            }
             None => inertia(
                 list.iter()
                     .map(|&j| j as usize)
@@ -206,8 +272,10 @@ fn exchange_momentum(world: &mut World, applied: &[(Suture, Vec<u32>)], params: 
             continue;
         };
         let i_t = inertia_of(world, None, samples);
-        let i_a = inertia_of(world, Some(a), &[]);
-        let i_b = inertia_of(world, Some(b), &[]);
+        // A without the terrane, B with it (counted whole even where the resampling's clean-up
+        // gave a few of its samples to another plate, so that I_B ≥ I_T).
+        let i_a = inertia_of(world, Some(a), samples);
+        let i_b = inertia_of(world, Some(b), samples) + i_t;
         let (wa, wb) = suture_exchange(
             i_a,
             i_b,
@@ -239,6 +307,7 @@ pub fn collision_uplift(world: &mut World) {
         return;
     }
     let params = world.resource::<Params>().clone();
+    dock_arcs(world, &applied, &params);
     if params.plates.momentum {
         exchange_momentum(world, &applied, &params);
     }

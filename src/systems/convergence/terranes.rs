@@ -152,12 +152,28 @@ pub fn close_trapped_ocean(world: &mut World) {
     );
 }
 
-/// Rebuilds the terranes: connected continental regions within each plate, as entities and as
-/// the per-sample [`TerraneField`].
+/// Rebuilds the terranes: connected continental regions within each plate, and with
+/// `collision.docking` the island arcs (connected regions of oceanic crust at least
+/// `collision.arc_min_thickness_km` thick), as entities and as the per-sample [`TerraneField`].
+/// An arc terrane is known by its samples' crust type (oceanic).
 pub fn build_terranes(world: &mut World) {
     let _timer = crate::systems::DebugTimer::new("build_terranes");
     let mesh = world.resource::<SphereMesh>();
     let crust = world.resource::<Crust>();
+    let params = world.resource::<Params>();
+    let arc_min = if params.collision.docking {
+        params.collision.arc_min_thickness_km as f32
+    } else {
+        f32::INFINITY
+    };
+    // The kind of terrane a sample belongs to: 1 continental, 2 arc, 0 none.
+    let kind = |i: usize| -> u8 {
+        match crust.crust_type[i] {
+            CrustType::Continental => 1,
+            CrustType::Oceanic if crust.thickness_km[i] >= arc_min => 2,
+            CrustType::Oceanic => 0,
+        }
+    };
     let n = mesh.len();
     let mut field = TerraneField {
         terrane: vec![NONE; n],
@@ -166,7 +182,8 @@ pub fn build_terranes(world: &mut World) {
     let mut terranes = Vec::new();
     let mut stack = Vec::new();
     for s in 0..n {
-        if field.terrane[s] != NONE || crust.crust_type[s] != CrustType::Continental {
+        let ks = kind(s);
+        if field.terrane[s] != NONE || ks == 0 {
             continue;
         }
         let t = field.area_km2.len() as u32;
@@ -181,10 +198,7 @@ pub fn build_terranes(world: &mut World) {
             count += 1;
             for &v in mesh.neighbors_of(u) {
                 let v = v as usize;
-                if field.terrane[v] == NONE
-                    && crust.crust_type[v] == CrustType::Continental
-                    && crust.plate[v] == plate
-                {
+                if field.terrane[v] == NONE && kind(v) == ks && crust.plate[v] == plate {
                     field.terrane[v] = t;
                     stack.push(v as u32);
                 }

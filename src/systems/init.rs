@@ -413,19 +413,7 @@ pub fn initial_planet(mesh: &SphereMesh, params: &Params) -> (Crust, Vec<Initial
         );
     }
 
-    let mut present = vec![false; n_plates];
-    for &p in &plate {
-        if p != NO_PLATE {
-            present[p as usize] = true;
-        }
-    }
-    let plates: Vec<InitialPlate> = (0..n_plates)
-        .filter(|&k| present[k])
-        .map(|k| InitialPlate {
-            id: PlateId(k as u32),
-            motion: plate_motion(params, k as u64),
-        })
-        .collect();
+    let plates = present_plates(&plate, n_plates, |k| plate_motion(params, k as u64));
     if plates.len() < n_plates {
         tracing::warn!(
             asked = n_plates,
@@ -669,23 +657,34 @@ pub fn planet_from_map(
         });
     crust.orogeny.iter_mut().for_each(|o| *o = Orogeny::None);
     crust.plate.copy_from_slice(&plate);
+    let plates = present_plates(&plate, n_plates, |k| {
+        start
+            .motions
+            .iter()
+            .find(|(p, _)| *p as usize == k)
+            .map(|&(_, m)| m)
+            .unwrap_or_else(|| plate_motion(params, k as u64))
+    });
+    Ok((crust, plates))
+}
+
+/// The plates among `0..n_plates` that cover at least one sample of `plate`, with their motions.
+fn present_plates(
+    plate: &[u32],
+    n_plates: usize,
+    motion: impl Fn(usize) -> PlateMotion,
+) -> Vec<InitialPlate> {
     let mut present = vec![false; n_plates];
-    for &p in &plate {
-        if p != NO_PLATE {
+    for &p in plate {
+        if (p as usize) < n_plates {
             present[p as usize] = true;
         }
     }
-    let plates = (0..n_plates)
+    (0..n_plates)
         .filter(|&k| present[k])
         .map(|k| InitialPlate {
             id: PlateId(k as u32),
-            motion: start
-                .motions
-                .iter()
-                .find(|(p, _)| *p as usize == k)
-                .map(|&(_, m)| m)
-                .unwrap_or_else(|| plate_motion(params, k as u64)),
+            motion: motion(k),
         })
-        .collect();
-    Ok((crust, plates))
+        .collect()
 }

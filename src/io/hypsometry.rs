@@ -97,11 +97,11 @@ pub struct Hypsometry {
     #[serde(default)]
     pub ocean_age_depth_r: Option<f64>,
     /// [`Hypsometry::ocean_age_depth_r`] over the normal floor only: oceanic crust younger than
-    /// [`AGE_DEPTH_MAX_AGE_MY`] outside trenches and carrying at most
-    /// [`NORMAL_FLOOR_MAX_LOAD_KM`] of crust or sediment over the normal oceanic thickness (the
-    /// floor a cooling law governs; Parsons & Sclater 1977 left seamounts, plateaus and
-    /// trenches out of their fit the same way). Set by the summary from the live crust and the
-    /// trench field; None where those are not at hand.
+    /// [`AGE_DEPTH_MAX_AGE_MY`] outside trenches and carrying no more over the normal oceanic
+    /// thickness than [`normal_floor_max_load_km`] (its pelagic cover; thicker crust is an arc,
+    /// a plateau or a sediment fan). That is the floor a cooling law governs: Parsons & Sclater
+    /// 1977 left seamounts, plateaus and trenches out of their fit the same way. Set by the
+    /// summary from the live crust and the trench field; None where those are not at hand.
     #[serde(default)]
     pub ocean_age_depth_r_normal_floor: Option<f64>,
 }
@@ -111,8 +111,11 @@ pub const AGE_DEPTH_MAX_AGE_MY: f32 = 80.0;
 
 /// Load (km of crust or sediment over the normal oceanic thickness) above which oceanic crust is
 /// an arc, a plateau or a sediment fan rather than normal floor, for
-/// [`Hypsometry::ocean_age_depth_r_normal_floor`].
-pub const NORMAL_FLOOR_MAX_LOAD_KM: f32 = 3.0;
+/// [`Hypsometry::ocean_age_depth_r_normal_floor`]: the pelagic cover the parameters lay on floor
+/// [`AGE_DEPTH_MAX_AGE_MY`] old (1.1 km at the default 14 m/My), plus 0.5 km.
+pub fn normal_floor_max_load_km(params: &crate::resources::Params) -> f64 {
+    params.sediment.pelagic_rate_m_per_my.max(0.0) * 1e-3 * AGE_DEPTH_MAX_AGE_MY as f64 + 0.5
+}
 
 /// Area-weighted Pearson correlation of depth (−elevation) with √age over the oceanic samples of
 /// `crust` younger than [`AGE_DEPTH_MAX_AGE_MY`] with finite age and elevation; None when there

@@ -119,7 +119,7 @@ pub fn summarize(sim: &Simulation, view: &Crust) -> Summary {
 
 /// [`Hypsometry::ocean_age_depth_r_normal_floor`] of the live crust: its samples outside the
 /// trenches the isostasy cut this step, with at most
-/// [`crate::io::hypsometry::NORMAL_FLOOR_MAX_LOAD_KM`] over the normal oceanic thickness. None
+/// [`crate::io::hypsometry::normal_floor_max_load_km`] over the normal oceanic thickness. None
 /// without the isostasy's trench field.
 fn normal_floor_age_depth_r(sim: &Simulation) -> Option<f64> {
     let crust = sim.crust();
@@ -130,8 +130,9 @@ fn normal_floor_age_depth_r(sim: &Simulation) -> Option<f64> {
     if trench.len() != crust.len() {
         return None;
     }
-    let max_t = sim.params().init.oceanic_thickness_km as f32
-        + crate::io::hypsometry::NORMAL_FLOOR_MAX_LOAD_KM;
+    let p = sim.params();
+    let max_t =
+        (p.init.oceanic_thickness_km + crate::io::hypsometry::normal_floor_max_load_km(p)) as f32;
     crate::io::hypsometry::age_depth_r_where(sim.mesh(), crust, |i| {
         trench[i] <= 0.0 && crust.thickness_km[i] <= max_t
     })

@@ -76,7 +76,11 @@ fn main() {
     for _ in 0..5 {
         let t = Instant::now();
         let boxes = boxes_of(&m);
-        let b = build_bvh2(&boxes, BvhBuildParams::fast_build(), &mut Duration::default());
+        let b = build_bvh2(
+            &boxes,
+            BvhBuildParams::fast_build(),
+            &mut Duration::default(),
+        );
         build_ms.push(t.elapsed().as_secs_f64() * 1e3);
         bvh = Some(b);
     }
@@ -124,11 +128,17 @@ fn main() {
             .filter(|((x, y), q)| x != y && !(**y != u32::MAX && inside(&m, **q, **x)))
             .count();
         let missed = b.iter().filter(|&&t| t == u32::MAX).count();
-        assert_eq!(differ, 0, "the BVH found another triangle for {differ} queries");
+        assert_eq!(
+            differ, 0,
+            "the BVH found another triangle for {differ} queries"
+        );
         assert_eq!(missed, 0, "the BVH found no triangle for {missed} queries");
         std::hint::black_box((s, s2));
     }
-    println!("build: grid {grid_build_ms:.1} ms, BVH {:.1} ms (median)", median(build_ms));
+    println!(
+        "build: grid {grid_build_ms:.1} ms, BVH {:.1} ms (median)",
+        median(build_ms)
+    );
     println!(
         "queries, all threads: grid {:.1} ms, BVH {:.1} ms (medians of 5)",
         median(grid_par),

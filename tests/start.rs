@@ -393,3 +393,43 @@ fn plates_map_and_motions_are_followed() {
         "{err}"
     );
 }
+
+#[test]
+fn a_map_start_takes_craters_and_names_what_it_ignores() {
+    let dir = temp_dir("craters");
+    let p = dir.join("relief.png");
+    write_png16(&p, 128, 64, |x, _| if x >= 64 { 60000 } else { 10000 });
+    write_sidecar(&p, 128, 64, (-180.0, -90.0, 180.0, 90.0));
+    let map = p.to_string_lossy().to_string();
+    let run = |extra: &[&str], name: &str| -> (Vec<u8>, String) {
+        let out = dir.join(name);
+        let dir_s = out.to_string_lossy().to_string();
+        let mut args = vec![
+            "generate",
+            "--samples",
+            "8000",
+            "--my",
+            "0",
+            "--width",
+            "128",
+            "--backend",
+            "cpu",
+            "--from-heightmap",
+            &map,
+            "--out",
+            &dir_s,
+        ];
+        args.extend_from_slice(extra);
+        let o = planet().args(&args).output().expect("run planet generate");
+        ok(&o);
+        (
+            std::fs::read(out.join("elevation16.png")).unwrap(),
+            String::from_utf8_lossy(&o.stderr).to_string(),
+        )
+    };
+    let (plain, _) = run(&[], "plain");
+    let (cratered, _) = run(&["--craters", "30"], "cratered");
+    assert_ne!(plain, cratered, "--craters changed nothing on a map start");
+    let (_, err) = run(&["--continental-fraction", "0.5"], "ignored");
+    assert!(err.contains("--continental-fraction is ignored"), "{err}");
+}

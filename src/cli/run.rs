@@ -134,6 +134,26 @@ impl StartArgs {
 }
 
 impl StartMaps {
+    /// The options of `planet` that a start from a map does not use, in words.
+    pub(crate) fn ignored(&self, a: &PlanetArgs) -> Vec<String> {
+        let mut out = Vec::new();
+        if a.continental_fraction.is_some() {
+            out.push(
+                "--continental-fraction is ignored: the map decides where the continents are"
+                    .into(),
+            );
+        }
+        if self.plates.is_some() {
+            if a.plates.is_some() {
+                out.push("--plates is ignored: the plates come from the plates map".into());
+            }
+            if a.init.is_some() {
+                out.push("--init is ignored: the plates come from the plates map".into());
+            }
+        }
+        out
+    }
+
     /// The planet of these maps.
     pub(crate) fn build(&self, params: Params) -> Result<Simulation> {
         use tectonic_planets::io::start::earth_elevation_m;
@@ -458,6 +478,13 @@ pub(crate) fn generate(a: GenerateArgs) -> Result<()> {
         None => None,
     };
     let start = a.start.load()?;
+    if let Some(s) = &start
+        && !a.quiet
+    {
+        for note in s.ignored(&a.planet) {
+            eprintln!("note: {note}");
+        }
+    }
     let mut sim = build_sim(&a.planet, params, plugins, start.as_ref())?;
     sim.world_mut()
         .resource_mut::<CommandHistory>()

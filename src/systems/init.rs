@@ -558,7 +558,8 @@ fn merge_small_plates(mesh: &SphereMesh, plate: &mut [u32], n_plates: usize, min
 /// law gives (shallower floor is young floor under a load, deeper floor old floor thinned), with
 /// the thickness that keeps its elevation. Plates come from `start.plates` (then made whole:
 /// pieces cut off from their plate join a neighbour) or are drawn as for a new planet; motions
-/// from `start.motions`, random for the plates it does not name.
+/// from `start.motions`, random for the plates it does not name. `init.craters` are struck into
+/// it as into a generated planet.
 pub fn planet_from_map(
     mesh: &SphereMesh,
     params: &Params,
@@ -657,6 +658,9 @@ pub fn planet_from_map(
         });
     crust.orogeny.iter_mut().for_each(|o| *o = Orogeny::None);
     crust.plate.copy_from_slice(&plate);
+    if params.init.craters > 0 {
+        crate::systems::craters::bombard(mesh, &mut crust, params);
+    }
     let plates = present_plates(&plate, n_plates, |k| {
         start
             .motions

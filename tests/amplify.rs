@@ -440,6 +440,22 @@ fn shipped_exemplars_load() {
     for e in &set.exemplars {
         assert!(e.range_m.1 > e.range_m.0, "{}: flat", e.path.display());
     }
+    // The real SRTM exemplar (assets/exemplars/SOURCES.md): an old range, 92.5 m pixels,
+    // hundreds of metres of relief.
+    let real = set
+        .exemplars
+        .iter()
+        .find(|e| e.path.to_string_lossy().contains("jacksboro"))
+        .expect("the real SRTM exemplar is shipped");
+    assert!(
+        set.by_type[TerrainType::Old as usize]
+            .iter()
+            .any(|&k| std::ptr::eq(&set.exemplars[k], real))
+    );
+    assert_eq!((real.width, real.height), (320, 320));
+    assert!((real.pixel_km - 0.092475).abs() < 1e-5, "{}", real.pixel_km);
+    let relief = real.range_m.1 - real.range_m.0;
+    assert!((700.0..900.0).contains(&relief), "relief {relief} m");
 }
 
 #[test]

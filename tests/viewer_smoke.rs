@@ -201,3 +201,54 @@ fn view_of_a_missing_save_names_the_file() {
     assert!(err.contains("none.planet"), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+/// `planet view --from-earth` opens today's Earth (its screenshot has ocean and land), and a
+/// saved planet cannot be combined with a map start.
+#[test]
+fn view_starts_from_earth_under_xvfb() {
+    let dir = temp_dir("earth");
+    let o = Command::new(env!("CARGO_BIN_EXE_planet"))
+        .args(["view", "some.planet", "--from-earth"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("--from-earth"), "{err}");
+    if !have("xvfb-run") {
+        if std::env::var("CI").is_ok_and(|v| v == "true") {
+            panic!("xvfb-run is missing on CI: install the `xvfb` package (.ci/run does)");
+        }
+        eprintln!("SKIPPED: xvfb-run is not installed (apt-get install xvfb)");
+        return;
+    }
+    let shot = dir.join("earth.png");
+    let runtime = dir.join("xdg");
+    std::fs::create_dir_all(&runtime).unwrap();
+    let mut cmd = Command::new("xvfb-run");
+    cmd.args(["-a", "-s", "-screen 0 1280x800x24"])
+        .arg(env!("CARGO_BIN_EXE_planet"))
+        .args(["view", "--samples", "20000", "--from-earth"])
+        .args(["--exit-after-steps", "1", "--screenshot"])
+        .arg(&shot)
+        .env("XDG_RUNTIME_DIR", &runtime)
+        .env_remove("WAYLAND_DISPLAY");
+    let (ok, out) = run_with_limit(cmd, Duration::from_secs(300));
+    assert!(ok, "planet view --from-earth failed:\n{out}");
+    let img = image::open(&shot)
+        .unwrap_or_else(|e| panic!("no readable screenshot at {}: {e}\n{out}", shot.display()))
+        .to_rgb8();
+    let (mut blue, mut green) = (0usize, 0usize);
+    for p in img.pixels() {
+        let [r, g, b] = p.0.map(i32::from);
+        if b > r + 40 && b > g {
+            blue += 1;
+        }
+        if g > r + 15 && g > b + 15 {
+            green += 1;
+        }
+    }
+    let n = (img.width() * img.height()) as usize;
+    assert!(
+        blue * 10 > n && green * 50 > n,
+        "blue {blue}, green {green} of {n} pixels"
+    );
+}

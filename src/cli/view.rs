@@ -43,6 +43,8 @@ pub(crate) struct ViewArgs {
     /// Vector layers drawn at start, comma-separated: folds, ridges, velocity, fronts, terranes.
     #[arg(long, value_delimiter = ',')]
     pub(crate) draw: Vec<String>,
+    #[command(flatten)]
+    pub(crate) start: StartArgs,
 }
 
 #[cfg(feature = "viewer")]
@@ -61,6 +63,12 @@ pub(crate) fn view(a: ViewArgs) -> Result<()> {
     setup_threads(a.planet.threads)?;
     // Parameters are checked here, before any window; the planet is built on the viewer's
     // simulation thread.
+    let start = a.start.load()?;
+    if start.is_some() && a.file.is_some() {
+        bail!(
+            "a saved planet is opened as it was saved: --from-heightmap and --from-earth start a new one"
+        );
+    }
     let source = match &a.file {
         Some(path) => {
             if !path.is_file() {
@@ -90,7 +98,10 @@ pub(crate) fn view(a: ViewArgs) -> Result<()> {
         let mut sim = match source {
             Err(path) => save::load_from_file(&path).map_err(|e| e.to_string())?,
             Ok((params, plugins)) => {
-                let mut sim = Simulation::new(params).map_err(|e| e.to_string())?;
+                let mut sim = match &start {
+                    Some(s) => s.build(params).map_err(|e| format!("{e:#}"))?,
+                    None => Simulation::new(params).map_err(|e| e.to_string())?,
+                };
                 sim.apply_plugin_config(&plugins)
                     .map_err(|e| e.to_string())?;
                 sim

@@ -93,18 +93,8 @@ fn view_steps_writes_a_screenshot_and_exits_under_xvfb() {
         img.height()
     );
     // Not blank: many distinct colours, and the map's ocean blues and land greens are there.
-    let mut colours = std::collections::HashSet::new();
-    let (mut blue, mut green) = (0usize, 0usize);
-    for p in img.pixels() {
-        colours.insert(p.0);
-        let [r, g, b] = p.0.map(i32::from);
-        if b > r + 40 && b > g {
-            blue += 1;
-        }
-        if g > r + 15 && g > b + 15 {
-            green += 1;
-        }
-    }
+    let colours: std::collections::HashSet<[u8; 3]> = img.pixels().map(|p| p.0).collect();
+    let (blue, green) = blue_and_green(&img);
     let n = (img.width() * img.height()) as usize;
     assert!(
         colours.len() > 500,

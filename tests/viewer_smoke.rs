@@ -15,6 +15,21 @@ fn temp_dir(name: &str) -> PathBuf {
     d
 }
 
+/// Pixels of a screenshot that are ocean blue and land green (the elevation map's colours).
+fn blue_and_green(img: &image::RgbImage) -> (usize, usize) {
+    let (mut blue, mut green) = (0usize, 0usize);
+    for p in img.pixels() {
+        let [r, g, b] = p.0.map(i32::from);
+        if b > r + 40 && b > g {
+            blue += 1;
+        }
+        if g > r + 15 && g > b + 15 {
+            green += 1;
+        }
+    }
+    (blue, green)
+}
+
 fn have(cmd: &str) -> bool {
     Command::new("sh")
         .arg("-c")
@@ -226,16 +241,7 @@ fn view_starts_from_earth_under_xvfb() {
     let img = image::open(&shot)
         .unwrap_or_else(|e| panic!("no readable screenshot at {}: {e}\n{out}", shot.display()))
         .to_rgb8();
-    let (mut blue, mut green) = (0usize, 0usize);
-    for p in img.pixels() {
-        let [r, g, b] = p.0.map(i32::from);
-        if b > r + 40 && b > g {
-            blue += 1;
-        }
-        if g > r + 15 && g > b + 15 {
-            green += 1;
-        }
-    }
+    let (blue, green) = blue_and_green(&img);
     let n = (img.width() * img.height()) as usize;
     assert!(
         blue * 10 > n && green * 50 > n,

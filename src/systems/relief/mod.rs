@@ -737,7 +737,7 @@ pub fn apply_isostasy(
                             let along = nrm.cross(w);
                             off.dot(nrm) * r_km >= -behind_km
                                 && off.dot(along).abs() * r_km
-                                    <= 0.5 * fp.length_km[sp as usize] as f64 + 2.0 * spacing
+                                    <= 0.5 * fp.length_km[sp as usize] as f64 + spacing
                         }
                         None => true,
                     },

@@ -730,14 +730,7 @@ pub fn apply_isostasy(
                 let faces = match (front[sp as usize], plate[i]) {
                     (Some((w, nrm)), pl) if pl != NO_PLATE => match table.get(pl) {
                         Some(s) => {
-                            let off = s.world_from_plate * positions[i] - w;
-                            // Ahead of the front, and beside the stretch of front the point
-                            // stands for (a plate a few samples wide has one front point: the
-                            // trench is that stretch, not an arc around the plate).
-                            let along = nrm.cross(w);
-                            off.dot(nrm) * r_km >= -behind_km
-                                && off.dot(along).abs() * r_km
-                                    <= 0.5 * fp.length_km[sp as usize] as f64 + spacing
+                            (s.world_from_plate * positions[i] - w).dot(nrm) * r_km >= -behind_km
                         }
                         None => true,
                     },

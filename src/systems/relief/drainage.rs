@@ -113,6 +113,9 @@ pub struct Drainage {
     order: Vec<u32>,
     pos: Vec<u32>,
     slots: Vec<u32>,
+    /// Position of each sample in the flood order of the basin being closed (`u32::MAX`
+    /// outside it).
+    flood_rank: Vec<u32>,
 }
 
 const IN_REGION: u8 = 1;
@@ -661,6 +664,13 @@ impl Drainage {
                 .map(|e| g.edge_km[e])
                 .unwrap_or(0.0)
         };
+        // A receiver must come before its donor in the flood order (which becomes the stack
+        // order): the flood's ε-raised pit samples can be popped before a sample whose water
+        // level is lower.
+        self.flood_rank.resize(g.len(), u32::MAX);
+        for (k, &i) in self.order.iter().enumerate() {
+            self.flood_rank[i as usize] = k as u32;
+        }
         for k in 0..self.order.len() {
             let i = self.order[k] as usize;
             if i == s {
@@ -675,15 +685,16 @@ impl Drainage {
                 self.receiver_km[i] = edge_to(g, i, pa);
                 continue;
             }
+            let before = |j: usize| (self.flood_rank[j] as usize) < k;
             let r0 = self.receiver[i] as usize;
-            if self.mark[r0] == CLOSED && self.water_level_km[r0] < li && r0 != i {
+            if self.mark[r0] == CLOSED && self.water_level_km[r0] < li && r0 != i && before(r0) {
                 continue;
             }
             let (mut r, mut d, mut best) = (pa, edge_to(g, i, pa), 0.0f32);
             for e in g.edges(i) {
                 let j = g.neighbors[e] as usize;
                 let dist = g.edge_km[e];
-                if dist <= 0.0 || self.mark[j] != CLOSED {
+                if dist <= 0.0 || self.mark[j] != CLOSED || !before(j) {
                     continue;
                 }
                 let sl = (li - self.water_level_km[j]) / dist;
@@ -713,6 +724,9 @@ impl Drainage {
             if r != i {
                 self.area_km2[r] += self.area_km2[i];
             }
+        }
+        for &i in &self.order {
+            self.flood_rank[i as usize] = u32::MAX;
         }
     }
 

@@ -213,8 +213,20 @@ fn older_ocean_subducts_and_an_island_arc_rises_on_the_younger() {
     );
 }
 
+/// The default: the terrane leaves its plate at once (a plate of its own, moving with the plate
+/// it joins) and sutures at the next regular resampling.
 #[test]
 fn continents_collide_and_the_terrane_changes_plate() {
+    continents_collide(false);
+}
+
+/// `collision.resample_at_suture`: the collision resamples at once (the paper's way).
+#[test]
+fn continents_collide_and_resample_at_once() {
+    continents_collide(true);
+}
+
+fn continents_collide(resample_at_suture: bool) {
     // A continent on the southern plate, centred 25° south of the front at longitude 90°,
     // carried north into the northern continent.
     let centre = tectonic_planets::geometry::from_lat_lon_deg(-25.0, 90.0);
@@ -226,8 +238,17 @@ fn continents_collide_and_the_terrane_changes_plate() {
         }
     };
     let mut sim = two_hemispheres(80_000, DVec3::X, 100.0, |_| continent(0.5), south);
+    {
+        let mut p = sim.world_mut().resource_mut::<Params>();
+        p.collision.resample_at_suture = resample_at_suture;
+        // Resamplings far enough apart that the terrane passes the threshold between two (at
+        // a resampling, any contact collides).
+        p.resample.min_interval_steps = 30;
+        p.resample.max_interval_steps = 30;
+    }
     let mesh = sim.mesh().clone();
     let area0 = continental_area(&mesh, sim.crust());
+    let mut detached_at = None;
     let terrane: Vec<usize> = (0..mesh.len())
         .filter(|&i| angle_between(mesh.positions[i], centre) < 11f64.to_radians())
         .collect();
@@ -248,13 +269,51 @@ fn continents_collide_and_the_terrane_changes_plate() {
                 sim.clock().steps_since_resample
             );
         }
+        let resamplings = sim.clock().resamplings;
+        let frame_before = sim.plate_table().get(1).unwrap().world_from_plate;
         sim.step().unwrap();
+        let waiting: Vec<_> = sim.world().resource::<Sutures>().pending.clone();
+        if let Some(s) = waiting.iter().find(|s| s.detached_plate.is_some()) {
+            assert!(
+                !resample_at_suture,
+                "a terrane detached without a resampling"
+            );
+            assert_eq!(
+                sim.clock().resamplings,
+                resamplings,
+                "the collision resampled"
+            );
+            let d = s.detached_plate.unwrap();
+            assert!(d != 0 && d != 1, "the terrane kept plate {d}");
+            let table = sim.plate_table();
+            let (dp, p0) = (table.get(d).unwrap(), table.get(0).unwrap());
+            // It moves with the plate it joins (at rest), from where its own plate had carried
+            // it when it left.
+            assert_eq!(dp.motion, p0.motion);
+            if detached_at.is_none() {
+                assert_eq!(dp.world_from_plate, frame_before);
+            }
+            let crust = sim.crust();
+            let on_d: Vec<usize> = (0..mesh.len()).filter(|&i| crust.plate[i] == d).collect();
+            assert!(on_d.len() > 100, "{} samples detached", on_d.len());
+            assert!(
+                on_d.iter()
+                    .all(|&i| crust.crust_type[i] == CrustType::Continental
+                        && angle_between(mesh.positions[i], centre) < 12.5f64.to_radians()),
+                "the detached plate holds samples outside the terrane"
+            );
+            detached_at.get_or_insert(step);
+        }
         if sim.world().resource::<Sutures>().total > 0 {
             collided_at = Some(step);
             break;
         }
     }
     let step = collided_at.expect("no collision within 120 My");
+    if !resample_at_suture {
+        let d = detached_at.expect("the terrane never waited on a plate of its own");
+        assert!(d < step, "detached at step {d}, sutured at {step}");
+    }
     assert!(
         step >= 5,
         "collision fired at step {step}, before the continents could meet"

@@ -1649,7 +1649,15 @@ fn relief_on_the_gpu_backend_runs_isostasy_and_diffusion_on_the_device() {
         let before = sim.world().resource::<GpuContext>().traffic;
         let fronts = sim.world().resource::<FrontPoints>().len();
         let (resamplings, since) = (sim.clock().resamplings, sim.clock().steps_since_resample);
+        let waiting = |sim: &Simulation| {
+            sim.world()
+                .resource::<tectonic_planets::resources::Sutures>()
+                .pending
+                .len()
+        };
+        let waiting_before = waiting(&sim);
         sim.step().expect("step");
+        let detached = waiting(&sim) > waiting_before;
         let gpu = sim.world().resource::<GpuContext>();
         let after = gpu.traffic;
         // Every step ran the isostatic combine and the land diffusion on the device.
@@ -1662,6 +1670,11 @@ fn relief_on_the_gpu_backend_runs_isostasy_and_diffusion_on_the_device() {
             after.diffusion_passes,
             before.diffusion_passes + 1,
             "{after:?}"
+        );
+        eprintln!(
+            "ZZ step res {} since {since} detached {detached} waiting {}",
+            sim.clock().resamplings != resamplings,
+            waiting(&sim)
         );
         if sim.clock().resamplings != resamplings || since == 0 {
             continue;
@@ -1689,7 +1702,13 @@ fn relief_on_the_gpu_backend_runs_isostasy_and_diffusion_on_the_device() {
         // the rivers; the elevation and thickness the coasts cut; the thickness after the
         // sediment (declared writes); the smoothed root and the trench depth; the front table
         // (32 B a point) and gather indices (12 B a point); uniforms.
-        let up_bound = 7 * n4 + (n as u64).div_ceil(32) * 4 + 4 * coast + 44 * fronts + 4096;
+        // A collision that detached a terrane uploads the new plate ids.
+        let up_bound = 7 * n4
+            + (n as u64).div_ceil(32) * 4
+            + 4 * coast
+            + 44 * fronts
+            + 4096
+            + if detached { n4 } else { 0 };
         // Down: the elevation the isostasy left on the device (pulled by the drainage), the
         // thickness the uplift kernel thickened (pulled by the rivers), the age (pulled by the
         // sediment), the diffused elevation and the coast's receipts; the reduction (24 B and

@@ -1186,3 +1186,35 @@ fn a_run_with_plate_momentum_resumes_exactly() {
         );
     }
 }
+
+/// A save made while a collided terrane waits on a plate of its own for its suture resumes to
+/// the same bits as a straight run (the waiting sutures are saved).
+#[test]
+fn a_save_with_a_terrane_waiting_for_its_suture_resumes_exactly() {
+    let p = small_params(10_000, 7);
+    let waiting = |sim: &Simulation| {
+        sim.world()
+            .resource::<tectonic_planets::resources::Sutures>()
+            .pending
+            .iter()
+            .any(|s| s.detached_plate.is_some())
+    };
+    let mut sim = Simulation::new(p.clone()).unwrap();
+    let mut k = 0;
+    while !waiting(&sim) {
+        assert!(k < 200, "no terrane waited for its suture in 400 My");
+        sim.step().unwrap();
+        k += 1;
+    }
+    let total = k + 25;
+    let mut resumed = round_trip(&mut sim);
+    assert!(waiting(&resumed), "the waiting suture was not saved");
+    resumed.run_steps(total - k).unwrap();
+    let mut straight = Simulation::new(p).unwrap();
+    straight.run_steps(total).unwrap();
+    assert_eq!(
+        resumed.state_hash(),
+        straight.state_hash(),
+        "resumed at step {k}"
+    );
+}

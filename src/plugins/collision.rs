@@ -1,6 +1,7 @@
 //! Continental collisions (phenomenon [`COLLISION`], paper §4.2): a terrane more than the
-//! interpenetration threshold under another plate's continent sutures to it at the next
-//! resampling, with a Himalayan surge around it. Systems:
+//! interpenetration threshold under another plate's continent leaves its plate at once, moving
+//! with the other plate, and sutures to it at the next resampling, with a Himalayan surge around
+//! it. Systems:
 //! [`crate::systems::convergence::collision`]; GPU kernel: [`crate::gpu::collision_uplift`].
 
 use bevy_app::{App, Plugin};
@@ -37,6 +38,10 @@ impl Plugin for CollisionPlugin {
             (
                 collision::detect_collisions
                     .in_set(TectonicSystems::Collision)
+                    .run_if(phenomenon_enabled(COLLISION)),
+                collision::detach_sutured_terranes
+                    .in_set(TectonicSystems::Collision)
+                    .after(collision::detect_collisions)
                     .run_if(phenomenon_enabled(COLLISION)),
                 collision::collide_before_resample
                     .in_set(ResampleSystems::Interpolate)

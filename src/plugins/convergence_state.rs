@@ -9,12 +9,13 @@ use crate::resources::{SaveSection, SectionError, SectionReader, SectionWriter};
 
 /// The convergent-boundary state (section `convergence.state`): subduction front points with
 /// their per-step state, the per-sample distance fields, the override pairs, the terranes and
-/// the collision count, plus the front and terrane entities. Saves made before this section
-/// existed load with empty fronts and terranes, rebuilt at the next resampling.
+/// the collision count, the sutures waiting for the next resampling (version 2), plus the front
+/// and terrane entities. Saves made before this section existed load with empty fronts and
+/// terranes, rebuilt at the next resampling; version 1 saves load with no suture waiting.
 pub fn convergence_section() -> SaveSection {
     SaveSection {
         name: "convergence.state",
-        version: 1,
+        version: 2,
         save: save_convergence,
         load: load_convergence,
         default: Some(|_| Ok(())),
@@ -72,7 +73,10 @@ fn save_convergence(world: &mut World, w: &mut SectionWriter) -> Result<(), Sect
     for &a in &t.area_km2 {
         w.f64(a);
     }
-    w.u64(world.resource::<Sutures>().total);
+    let sutures = world.resource::<Sutures>();
+    w.u64(sutures.total);
+    // Version 2: the sutures waiting for the next resampling (terranes already detached).
+    let pending = sutures.pending.clone();
     w.f64(
         world
             .resource::<crate::systems::resample::ResampleWork>()
@@ -108,10 +112,22 @@ fn save_convergence(world: &mut World, w: &mut SectionWriter) -> Result<(), Sect
         w.u32s(&f.points);
         w.f64(f.length_km);
     }
+    w.u32(pending.len() as u32);
+    for s in &pending {
+        w.u32(s.terrane);
+        w.u32(s.from_plate);
+        w.u32(s.to_plate);
+        w.u32(s.detached_plate.unwrap_or(u32::MAX));
+        w.f64(s.area_km2);
+        w.f64(s.relative_speed_km_per_my);
+        for v in s.centroid_world.to_array() {
+            w.f64(v);
+        }
+    }
     Ok(())
 }
 
-fn load_convergence(world: &mut World, r: &mut SectionReader, _v: u32) -> Result<(), SectionError> {
+fn load_convergence(world: &mut World, r: &mut SectionReader, v: u32) -> Result<(), SectionError> {
     use crate::components::{FrontKind, PlateId, SubductionFront, Terrane};
     use crate::resources::{ConvergenceField, FrontPoints, OverridePairs, Sutures, TerraneField};
     use glam::DVec3;
@@ -250,6 +266,37 @@ fn load_convergence(world: &mut World, r: &mut SectionReader, _v: u32) -> Result
             length_km: r.finite_f64("front length")?,
         });
     }
+    // Version 1 saves were made between steps, when no suture waits.
+    let mut pending = Vec::new();
+    if v >= 2 {
+        let np = r.u32()? as usize;
+        if r.remaining() < np.saturating_mul(56) {
+            return Err("pending sutures are truncated".into());
+        }
+        for _ in 0..np {
+            let (terrane, from_plate, to_plate, detached) =
+                (r.u32()?, r.u32()?, r.u32()?, r.u32()?);
+            if terrane as usize >= area_km2.len() {
+                return Err(format!(
+                    "pending suture names terrane {terrane}, which does not exist"
+                )
+                .into());
+            }
+            pending.push(crate::resources::Suture {
+                terrane,
+                from_plate,
+                to_plate,
+                detached_plate: (detached != u32::MAX).then_some(detached),
+                area_km2: r.finite_f64("suture area")?,
+                relative_speed_km_per_my: r.finite_f64("suture speed")?,
+                centroid_world: DVec3::new(
+                    r.finite_f64("suture centroid")?,
+                    r.finite_f64("suture centroid")?,
+                    r.finite_f64("suture centroid")?,
+                ),
+            });
+        }
+    }
     r.finish()?;
     world.insert_resource(FrontPoints {
         sample,
@@ -279,7 +326,11 @@ fn load_convergence(world: &mut World, r: &mut SectionReader, _v: u32) -> Result
         plate,
         centroid,
     });
-    world.resource_mut::<Sutures>().total = total;
+    {
+        let mut s = world.resource_mut::<Sutures>();
+        s.total = total;
+        s.pending = pending;
+    }
     world
         .resource_mut::<crate::systems::resample::ResampleWork>()
         .continental_subducted_total_km2 = subducted;

@@ -107,9 +107,21 @@ pub struct Suture {
     pub relative_speed_km_per_my: f64,
     /// Its centroid, world frame.
     pub centroid_world: DVec3,
+    /// The plate the terrane moves on until the suture is applied, when it left its plate at
+    /// once (`collision.resample_at_suture` off): a plate of its own that kept the frame of
+    /// `from_plate` and moves with `to_plate` (or `from_plate` itself, when the terrane was
+    /// the whole plate). `None` while the terrane is still on `from_plate`.
+    pub detached_plate: Option<u32>,
 }
 
-/// Collisions waiting for the resampling of this step, and the ones it applied (for the
+impl Suture {
+    /// The plate whose samples of the terrane move at the suture.
+    pub fn moving_plate(&self) -> u32 {
+        self.detached_plate.unwrap_or(self.from_plate)
+    }
+}
+
+/// Collisions waiting for the next resampling, and the ones it applied (for the
 /// collision uplift that follows it).
 #[derive(Resource, Clone, Debug, Default)]
 pub struct Sutures {

@@ -561,11 +561,17 @@ pub fn rift_plates(world: &mut World) {
     let seed = params.planet.seed;
     let step = world.resource::<SimClock>().step;
     let planet_area = world.resource::<SphereMesh>().total_area_km2();
+    // A terrane waiting for its suture on a plate of its own does not rift.
+    let detached: Vec<u32> = world
+        .get_resource::<crate::resources::Sutures>()
+        .map(|s| s.pending.iter().filter_map(|s| s.detached_plate).collect())
+        .unwrap_or_default();
     let mut rates: Vec<(u32, f64)> = {
         let params = world.resource::<Params>().clone();
         world
             .query::<(&Plate, &PlateStats)>()
             .iter(world)
+            .filter(|(p, _)| !detached.contains(&p.id.0))
             .map(|(p, s)| (p.id.0, rift_rate_per_step(&params, s, planet_area)))
             .filter(|&(_, l)| l > 0.0)
             .collect()

@@ -266,6 +266,7 @@ define_params! {
         min_terrane_km2: f64 = 100000.0, 0.0..=1e9, "km²", "A continent smaller than this does not collide as one (paper §4.1): meeting a larger one it docks onto it at the next resampling (collision.docking), else it is forced under and counted as subducted continental crust.";
         docking: bool = false, false..=true, "", "Island arcs (oceanic crust at least collision.arc_min_thickness_km thick) and microcontinents (smaller than collision.min_terrane_km2) that reach a continent at a front dock onto it at the next resampling (paper Fig. 15): they join its plate, arcs becoming continental crust at their elevation, with a suture. Off: they are forced under, as in the paper.";
         arc_min_thickness_km: f64 = 30.0, 1.0..=100.0, "km", "Oceanic crust at least this thick (mature island arcs and oceanic plateaus: the Aleutian arc is 30-35 km thick, Ontong Java 30-35 km; normal oceanic crust is init.oceanic_thickness_km) docks onto a continent instead of subducting (collision.docking). 20 km lets thick sediment piles dock too and grows the continents by 10-18% in 250 My; 12 km by half.";
+        resample_at_suture: bool = false, false..=true, "", "On: every collision forces a global resampling in its step, where its terrane joins the other plate (the paper's way; also always so with plates.momentum). Off: the terrane leaves its plate at once as a plate of its own, keeping its place and moving with the plate it joins, and sutures at the next regular resampling (no resampling of its own).";
         max_uplift_km: f64 = 0.5, 0.0..=30.0, "km", "Saturation of the collision surge: Δz = H·(1 − exp(−Δ_c·A/H)), Δ_c·A for small terranes, at most H for continents (with isostasy on, the crust thickens by Δz/(1 − ρ_c/ρ_m): 3.3 km at 0.5 km, and collisions repeat).";
     }
     /// Isostasy: surface elevation from crust thickness (continents, regional Airy) and from
@@ -955,7 +956,7 @@ mod tests {
     #[test]
     fn schema_is_consistent() {
         let schema = Params::schema();
-        assert_eq!(schema.len(), 99);
+        assert_eq!(schema.len(), 100);
         assert_eq!(schema.len(), BOUNDS.len());
         let mut seen = HashSet::new();
         for (spec, (lo, hi)) in schema.iter().zip(BOUNDS) {

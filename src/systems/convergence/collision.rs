@@ -16,8 +16,8 @@ use crate::gpu::{GpuContext, run_or_record};
 use crate::resources::convergence::NONE;
 use crate::resources::params::Params;
 use crate::resources::{
-    ConvergenceField, Crust, CrustType, FrontPoints, Orogeny, PlateTable, ResampleRequest, Suture,
-    Sutures, TerraneField,
+    ConvergenceField, Crust, CrustType, FrontPoints, NextPlateId, Orogeny, PlateTable,
+    ResampleRequest, Suture, Sutures, TerraneField,
 };
 
 /// Finds terranes colliding now: continental crust of a subducting plate more than
@@ -119,6 +119,7 @@ pub fn find_collisions(
             area_km2: terranes.area_km2[moving as usize],
             relative_speed_km_per_my: v,
             centroid_world: centroid,
+            detached_plate: None,
         });
         any = true;
     }
@@ -163,8 +164,16 @@ impl CollisionInputs<'_, '_> {
     }
 }
 
+/// Whether a collision forces a global resampling in its step: `collision.resample_at_suture`,
+/// and always with plate momentum (its exchange at the suture reads every plate in the
+/// reference frame).
+pub fn resample_at_suture(params: &Params) -> bool {
+    params.collision.resample_at_suture || params.plates.momentum
+}
+
 /// Collision detection at the start of a step (threshold `collision.interpenetration_km`,
-/// looking one step ahead); asks for a resampling when a collision fires.
+/// looking one step ahead). With [`resample_at_suture`] a collision asks for a resampling;
+/// otherwise [`detach_sutured_terranes`] moves its terrane next.
 pub fn detect_collisions(
     inputs: CollisionInputs,
     mut sutures: ResMut<Sutures>,
@@ -172,8 +181,151 @@ pub fn detect_collisions(
 ) {
     let t = inputs.params.collision.interpenetration_km;
     let ahead = inputs.params.time.time_step_my;
-    if inputs.find(t, ahead, &mut sutures) {
+    if inputs.find(t, ahead, &mut sutures) && resample_at_suture(&inputs.params) {
         request.0 = true;
+    }
+}
+
+/// Right after detection, unless collisions resample at once ([`resample_at_suture`]): the
+/// terrane of each new suture leaves its plate now, without a global resampling. Its samples
+/// become a plate of their own that keeps the frame of the plate they leave (so nothing jumps)
+/// and moves with the plate they join (so the convergence stops); the next regular resampling
+/// applies the suture as before (the terrane stays on top where it overlaps, joins its new
+/// plate, and the collision surge follows). A terrane that was its whole plate keeps it, and the
+/// plate takes the motion of the one it joins. A terrane meeting a detached terrane joins the
+/// plate that one joins.
+pub fn detach_sutured_terranes(world: &mut World) {
+    let params = world.resource::<Params>().clone();
+    if resample_at_suture(&params) {
+        return;
+    }
+    let todo: Vec<usize> = world
+        .resource::<Sutures>()
+        .pending
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.detached_plate.is_none())
+        .map(|(k, _)| k)
+        .collect();
+    if todo.is_empty() {
+        return;
+    }
+    let plates: Vec<(Entity, u32, PlateFrame, PlateMotion)> = world
+        .query::<(Entity, &Plate, &PlateFrame, &PlateMotion)>()
+        .iter(world)
+        .map(|(e, p, f, m)| (e, p.id.0, *f, *m))
+        .collect();
+    let find = |id: u32| plates.iter().find(|p| p.1 == id);
+    let mut touched = Vec::new();
+    let mut dropped = Vec::new();
+    // New plate ids, written at the end in one declared write (one upload on the GPU backend),
+    // and how many samples each plate gave away so far.
+    let mut relabel: Vec<(Vec<u32>, u32)> = Vec::new();
+    let mut given: Vec<(u32, usize)> = Vec::new();
+    for k in todo {
+        let mut suture = world.resource::<Sutures>().pending[k].clone();
+        // Follow detached plates to the plate they join (a chain is at most as long as the
+        // pending list).
+        for _ in 0..world.resource::<Sutures>().pending.len() {
+            let pending = &world.resource::<Sutures>().pending;
+            match pending
+                .iter()
+                .find(|p| p.detached_plate == Some(suture.to_plate))
+            {
+                Some(p) => suture.to_plate = p.to_plate,
+                None => break,
+            }
+        }
+        let (Some(from), Some(to)) = (find(suture.from_plate), find(suture.to_plate)) else {
+            dropped.push(k);
+            continue;
+        };
+        if suture.from_plate == suture.to_plate {
+            dropped.push(k);
+            continue;
+        }
+        let (samples, on_plate) = {
+            let crust = world.resource::<Crust>();
+            let terranes = world.resource::<TerraneField>();
+            let samples: Vec<u32> = (0..crust.len().min(terranes.terrane.len()))
+                .filter(|&i| {
+                    terranes.terrane[i] == suture.terrane && crust.plate[i] == suture.from_plate
+                })
+                .map(|i| i as u32)
+                .collect();
+            let on_plate = crust
+                .plate
+                .iter()
+                .filter(|&&p| p == suture.from_plate)
+                .count()
+                - given
+                    .iter()
+                    .filter(|g| g.0 == suture.from_plate)
+                    .map(|g| g.1)
+                    .sum::<usize>();
+            (samples, on_plate)
+        };
+        if samples.is_empty() {
+            dropped.push(k);
+            continue;
+        }
+        let motion = to.3;
+        let count = samples.len();
+        let detached = if count >= on_plate {
+            world.entity_mut(from.0).insert(motion);
+            suture.from_plate
+        } else {
+            let id = {
+                let mut next = world.resource_mut::<NextPlateId>();
+                next.0 += 1;
+                next.0 - 1
+            };
+            world
+                .spawn(Plate::bundle(crate::components::PlateId(id), motion))
+                .insert(from.2);
+            given.push((suture.from_plate, count));
+            relabel.push((samples, id));
+            touched.extend([suture.from_plate, id]);
+            id
+        };
+        if let Some(p) = world
+            .resource_mut::<TerraneField>()
+            .plate
+            .get_mut(suture.terrane as usize)
+        {
+            *p = detached;
+        }
+        let mut q = world.query::<&mut crate::components::Terrane>();
+        for mut t in q.iter_mut(world) {
+            if t.index == suture.terrane {
+                t.plate = crate::components::PlateId(detached);
+            }
+        }
+        suture.detached_plate = Some(detached);
+        tracing::debug!(
+            terrane = suture.terrane,
+            from = suture.from_plate,
+            to = suture.to_plate,
+            plate = detached,
+            samples = count,
+            "collision: terrane detached"
+        );
+        world.resource_mut::<Sutures>().pending[k] = suture;
+    }
+    for &k in dropped.iter().rev() {
+        world.resource_mut::<Sutures>().pending.remove(k);
+    }
+    if !relabel.is_empty() {
+        crate::gpu::write_crust_fields_or_record(world, crate::gpu::FieldMask::PLATE, |crust| {
+            for (samples, id) in &relabel {
+                for &s in samples {
+                    crust.plate[s as usize] = *id;
+                }
+            }
+        });
+    }
+    if !touched.is_empty() {
+        crate::systems::rifting::refresh_plate_geometry(world, &touched);
     }
 }
 

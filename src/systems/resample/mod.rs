@@ -118,7 +118,7 @@ pub fn resample_interpolate(
     let table = PlateTable::from_query(&plates);
     let work = &mut *work;
     // Pending sutures: which old samples move to which plate.
-    let pending: Vec<crate::resources::Suture> = sutures
+    let mut pending: Vec<crate::resources::Suture> = sutures
         .as_mut()
         .map(|s| std::mem::take(&mut s.pending))
         .unwrap_or_default();
@@ -131,9 +131,21 @@ pub fn resample_interpolate(
         for (i, &ter) in t.terrane.iter().enumerate() {
             if let Some(k) = pending
                 .iter()
-                .position(|s| s.terrane == ter && crust.plate[i] == s.from_plate)
+                .position(|s| s.terrane == ter && crust.plate[i] == s.moving_plate())
             {
                 suture_of_sample[i] = k as u32;
+            }
+        }
+    }
+    // A terrane that left its plate earlier has moved with the plate it joins since: its
+    // centroid is where its own plate's frame puts it now.
+    if let Some(t) = terranes.as_ref() {
+        for s in pending.iter_mut() {
+            if let (Some(d), Some(c)) = (
+                s.detached_plate.and_then(|d| table.get(d)),
+                t.centroid.get(s.terrane as usize),
+            ) {
+                s.centroid_world = d.world_from_plate * *c;
             }
         }
     }

@@ -244,26 +244,26 @@ pub fn detach_sutured_terranes(world: &mut World) {
             dropped.push(k);
             continue;
         }
+        // The terrane's samples on the plate it leaves, and how many samples that plate holds.
         let (samples, on_plate) = {
             let crust = world.resource::<Crust>();
             let terranes = world.resource::<TerraneField>();
-            let samples: Vec<u32> = (0..crust.len().min(terranes.terrane.len()))
-                .filter(|&i| {
-                    terranes.terrane[i] == suture.terrane && crust.plate[i] == suture.from_plate
-                })
-                .map(|i| i as u32)
-                .collect();
-            let on_plate = crust
-                .plate
+            let mut samples = Vec::new();
+            let mut on_plate = 0usize;
+            for i in 0..crust.len().min(terranes.terrane.len()) {
+                if crust.plate[i] == suture.from_plate {
+                    on_plate += 1;
+                    if terranes.terrane[i] == suture.terrane {
+                        samples.push(i as u32);
+                    }
+                }
+            }
+            let gone: usize = given
                 .iter()
-                .filter(|&&p| p == suture.from_plate)
-                .count()
-                - given
-                    .iter()
-                    .filter(|g| g.0 == suture.from_plate)
-                    .map(|g| g.1)
-                    .sum::<usize>();
-            (samples, on_plate)
+                .filter(|g| g.0 == suture.from_plate)
+                .map(|g| g.1)
+                .sum();
+            (samples, on_plate - gone)
         };
         if samples.is_empty() {
             dropped.push(k);

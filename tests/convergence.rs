@@ -213,6 +213,20 @@ fn older_ocean_subducts_and_an_island_arc_rises_on_the_younger() {
     );
 }
 
+/// A continent of 12° radius on the southern plate, centred 25° south of the front at longitude
+/// 90°, in old ocean: the crust function for [`two_hemispheres`], and its centre.
+fn southern_continent() -> (DVec3, impl Fn(DVec3) -> (CrustType, f32, f32) + Copy) {
+    let centre = tectonic_planets::geometry::from_lat_lon_deg(-25.0, 90.0);
+    let south = move |q: DVec3| {
+        if angle_between(q, centre) < 12f64.to_radians() {
+            continent(0.5)
+        } else {
+            ocean(-4.5, 100.0)
+        }
+    };
+    (centre, south)
+}
+
 /// The default: the terrane leaves its plate at once (a plate of its own, moving with the plate
 /// it joins) and sutures at the next regular resampling.
 #[test]
@@ -227,16 +241,7 @@ fn continents_collide_and_resample_at_once() {
 }
 
 fn continents_collide(resample_at_suture: bool) {
-    // A continent on the southern plate, centred 25° south of the front at longitude 90°,
-    // carried north into the northern continent.
-    let centre = tectonic_planets::geometry::from_lat_lon_deg(-25.0, 90.0);
-    let south = move |q: DVec3| {
-        if angle_between(q, centre) < 12f64.to_radians() {
-            continent(0.5)
-        } else {
-            ocean(-4.5, 100.0)
-        }
-    };
+    let (centre, south) = southern_continent();
     let mut sim = two_hemispheres(80_000, DVec3::X, 100.0, |_| continent(0.5), south);
     {
         let mut p = sim.world_mut().resource_mut::<Params>();
@@ -463,14 +468,7 @@ fn default_planet_over_1000_my_keeps_its_continents() {
 /// to the plate it joins and the collision exchanges an impulse); without it, they plough on.
 #[test]
 fn colliding_continents_slow_down_with_momentum() {
-    let centre = tectonic_planets::geometry::from_lat_lon_deg(-25.0, 90.0);
-    let south = move |q: DVec3| {
-        if angle_between(q, centre) < 12f64.to_radians() {
-            continent(0.5)
-        } else {
-            ocean(-4.5, 100.0)
-        }
-    };
+    let (_, south) = southern_continent();
     let closing = |momentum: bool| -> (f64, f64) {
         let mut sim = two_hemispheres(40_000, DVec3::X, 100.0, |_| continent(0.5), south);
         sim.world_mut().resource_mut::<Params>().plates.momentum = momentum;

@@ -205,11 +205,7 @@ fn normal_ocean_floor_of_a_whole_planet_follows_the_cooling_law() {
 #[test]
 fn every_land_sample_comes_after_its_receiver_every_step() {
     use tectonic_planets::systems::relief::DrainageNetwork;
-    let mut p = params(10_000, 7);
-    p.init.plates = 12;
-    p.resample.min_interval_steps = 4;
-    p.resample.max_interval_steps = 9;
-    let mut sim = Simulation::new(p).unwrap();
+    let mut sim = Simulation::new(small_params(10_000, 7)).unwrap();
     let mut closed = 0;
     for step in 0..40 {
         sim.step().unwrap();

@@ -22,14 +22,6 @@ fn temp_dir(name: &str) -> PathBuf {
 }
 
 /// Small planet with frequent resamplings, so short runs cross several.
-fn small_params(samples: u64, seed: u64) -> Params {
-    let mut p = params(samples, seed);
-    p.init.plates = 12;
-    p.resample.min_interval_steps = 4;
-    p.resample.max_interval_steps = 9;
-    p
-}
-
 fn round_trip(sim: &mut Simulation) -> Simulation {
     let bytes = save::save_to_bytes(sim).unwrap();
     save::load_from_bytes(&bytes, Path::new("<test>")).unwrap()

@@ -12,6 +12,16 @@ pub fn params(samples: u64, seed: u64) -> Params {
     p
 }
 
+/// A small, busy planet: 12 plates, resampled every 4 to 9 steps (collisions, lakes and
+/// resamplings come within a few tens of steps).
+pub fn small_params(samples: u64, seed: u64) -> Params {
+    let mut p = params(samples, seed);
+    p.init.plates = 12;
+    p.resample.min_interval_steps = 4;
+    p.resample.max_interval_steps = 9;
+    p
+}
+
 /// The surface processes of the relief (isostasy, drainage, rivers, coasts, sediment): tests of moving,
 /// resampling or the paper's kernels switch them off.
 pub const RELIEF: [&str; 5] = ["isostasy", "drainage", "rivers", "coasts", "sediment"];

@@ -195,8 +195,7 @@ pub fn detect_collisions(
 /// plate takes the motion of the one it joins. A terrane meeting a detached terrane joins the
 /// plate that one joins.
 pub fn detach_sutured_terranes(world: &mut World) {
-    let params = world.resource::<Params>().clone();
-    if resample_at_suture(&params) {
+    if resample_at_suture(world.resource::<Params>()) {
         return;
     }
     let todo: Vec<usize> = world

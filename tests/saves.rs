@@ -1183,7 +1183,8 @@ fn a_run_with_plate_momentum_resumes_exactly() {
 /// the same bits as a straight run (the waiting sutures are saved).
 #[test]
 fn a_save_with_a_terrane_waiting_for_its_suture_resumes_exactly() {
-    let p = small_params(10_000, 7);
+    let mut p = small_params(10_000, 7);
+    p.collision.resample_at_suture = false;
     let waiting = |sim: &Simulation| {
         sim.world()
             .resource::<tectonic_planets::resources::Sutures>()

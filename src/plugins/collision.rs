@@ -1,7 +1,7 @@
 //! Continental collisions (phenomenon [`COLLISION`], paper §4.2): a terrane more than the
-//! interpenetration threshold under another plate's continent leaves its plate at once, moving
-//! with the other plate, and sutures to it at the next resampling, with a Himalayan surge around
-//! it. Systems:
+//! interpenetration threshold under another plate's continent sutures to it at a resampling (in
+//! its step, or with `collision.resample_at_suture` off the next regular one, the terrane moving
+//! with that plate meanwhile), with a Himalayan surge around it. Systems:
 //! [`crate::systems::convergence::collision`]; GPU kernel: [`crate::gpu::collision_uplift`].
 
 use bevy_app::{App, Plugin};

@@ -186,7 +186,7 @@ pub fn detect_collisions(
     }
 }
 
-/// Right after detection, unless collisions resample at once ([`resample_at_suture`]): the
+/// Right after detection, when collisions do not resample at once ([`resample_at_suture`]): the
 /// terrane of each new suture leaves its plate now, without a global resampling. Its samples
 /// become a plate of their own that keeps the frame of the plate they leave (so nothing jumps)
 /// and moves with the plate they join (so the convergence stops); the next regular resampling

@@ -730,7 +730,16 @@ pub fn apply_isostasy(
                 let faces = match (front[sp as usize], plate[i]) {
                     (Some((w, nrm)), pl) if pl != NO_PLATE => match table.get(pl) {
                         Some(s) => {
-                            (s.world_from_plate * positions[i] - w).dot(nrm) * r_km >= -behind_km
+                            let off = s.world_from_plate * positions[i] - w;
+                            // Ahead of the front, and beside the stretch of front the point
+                            // stands for: a plate a few samples wide has one front point, and
+                            // its trench is that stretch, not an arc around the plate. Two
+                            // spacings of slack, because a sample's front point comes from a
+                            // graph search and can sit more than one spacing to the side.
+                            let along = nrm.cross(w);
+                            off.dot(nrm) * r_km >= -behind_km
+                                && off.dot(along).abs() * r_km
+                                    <= 0.5 * fp.length_km[sp as usize] as f64 + 2.0 * spacing
                         }
                         None => true,
                     },

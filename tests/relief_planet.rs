@@ -228,3 +228,66 @@ fn every_land_sample_comes_after_its_receiver_every_step() {
     }
     assert!(closed > 0, "no closed lake in the run");
 }
+
+/// With the ocean's water fixed (`isostasy.ocean_volume_layer_km`), the water below sea level
+/// keeps that volume after every step without a resampling (rifts and collisions included), and the
+/// summary reports how far the sea stands above the isostatic datum. Less water lets more land
+/// stand out of the sea.
+#[test]
+fn the_ocean_keeps_its_water_volume_and_the_sea_level_follows() {
+    let run = |layer_km: f64| {
+        let mut p = small_params(10_000, 2);
+        p.isostasy.ocean_volume_layer_km = layer_km;
+        let mut sim = Simulation::new(p).unwrap();
+        let total: f64 = sim.mesh().area_km2.iter().sum();
+        let mut checked = 0;
+        for step in 0..30 {
+            let before = sim.clock().resamplings;
+            sim.step().unwrap();
+            if sim.clock().resamplings != before {
+                // A resampling after the isostasy moves the surface (interpolation, new floor
+                // at the datum's ridge depth): the next step's isostasy settles it again.
+                continue;
+            }
+            checked += 1;
+            let c = sim.crust();
+            let v: f64 = (0..c.len())
+                .filter(|&i| c.elevation_km[i] < 0.0)
+                .map(|i| -(c.elevation_km[i] as f64) * sim.mesh().area_km2[i])
+                .sum();
+            assert!(
+                (v / total - layer_km).abs() < 1e-4 * layer_km,
+                "step {step}: water {:.5} km as a global layer, against {layer_km}",
+                v / total
+            );
+        }
+        assert!(checked >= 15, "{checked} steps without a resampling");
+        let view = sim.resampled_crust();
+        tectonic_planets::io::summary::summarize(&sim, &view).hypsometry
+    };
+    let (wet, dry) = (run(2.8), run(2.4));
+    let (s_wet, s_dry) = (
+        wet.sea_level_m.expect("sea level"),
+        dry.sea_level_m.expect("sea level"),
+    );
+    assert!(
+        s_wet > s_dry + 100.0,
+        "sea level {s_wet:.0} m with more water, {s_dry:.0} m with less"
+    );
+    assert!(
+        dry.land_fraction > wet.land_fraction + 0.005,
+        "land {:.3} with less water, {:.3} with more (sea level {s_dry:.0} and {s_wet:.0} m)",
+        dry.land_fraction,
+        wet.land_fraction
+    );
+    // Off: no sea level in the summary.
+    let mut sim = Simulation::new(small_params(10_000, 2)).unwrap();
+    sim.step().unwrap();
+    let view = sim.resampled_crust();
+    assert_eq!(
+        tectonic_planets::io::summary::summarize(&sim, &view)
+            .hypsometry
+            .sea_level_m,
+        None
+    );
+}

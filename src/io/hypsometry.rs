@@ -104,6 +104,12 @@ pub struct Hypsometry {
     /// summary from the live crust and the trench field; None where those are not at hand.
     #[serde(default)]
     pub ocean_age_depth_r_normal_floor: Option<f64>,
+    /// Height of the sea above the isostatic datum, m, when `isostasy.ocean_volume_layer_km`
+    /// fixes the water's volume (positive: the basins hold less than that water at the datum,
+    /// and the sea has risen over the land). Set by the summary from the live isostasy; None
+    /// with the sea fixed at the datum.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sea_level_m: Option<f64>,
 }
 
 /// Oldest oceanic crust (My) that [`Hypsometry::ocean_age_depth_r`] and [`age_depth_r`] count.
@@ -259,6 +265,7 @@ pub fn hypsometry(mesh: &SphereMesh, crust: &Crust) -> Hypsometry {
         quantiles_m,
         ocean_age_depth_r: age_depth_r(mesh, crust),
         ocean_age_depth_r_normal_floor: None,
+        sea_level_m: None,
     }
 }
 

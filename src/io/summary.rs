@@ -111,10 +111,20 @@ pub fn summarize(sim: &Simulation, view: &Crust) -> Summary {
         resamplings: sim.clock().resamplings,
         hypsometry: Hypsometry {
             ocean_age_depth_r_normal_floor: normal_floor_age_depth_r(sim),
+            sea_level_m: sea_level_m(sim),
             ..crate::io::hypsometry::hypsometry(mesh, view)
         },
         drainage: None,
     }
+}
+
+/// [`Hypsometry::sea_level_m`] of the live isostasy: None with the sea fixed at the datum.
+fn sea_level_m(sim: &Simulation) -> Option<f64> {
+    (sim.params().isostasy.ocean_volume_layer_km > 0.0).then_some(())?;
+    let state = sim
+        .world()
+        .get_resource::<crate::systems::relief::ReliefState>()?;
+    Some(state.sea_level_km * 1000.0)
 }
 
 /// [`Hypsometry::ocean_age_depth_r_normal_floor`] of the live crust: its samples outside the

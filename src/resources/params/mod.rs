@@ -285,6 +285,7 @@ define_params! {
         trench_width_km: f64 = 80.0, 1.0..=2000.0, "km", "Distance from the front over which the trench shallows to the sea floor on either side (profile (1 − |d|/w)²: about 50 km wide at half depth; observed trenches are 40–120 km wide, DESIGN §7).";
         max_thickness_km: f64 = 75.0, 10.0..=300.0, "km", "Subduction and collisions never thicken continental crust beyond this (about 6.4 km of elevation under Airy isostasy at the defaults; the crust of Tibet is about 70 km thick), and isostasy floats no more than this: a column made thicker by sediment or resampling stands where one this thick would (over-thickened roots delaminate: Kay & Kay 1993).";
         max_oceanic_thickness_km: f64 = 30.0, 1.0..=300.0, "km", "Subduction never thickens oceanic crust (island arcs) beyond this (about +3 km on old sea floor at the defaults; real arcs have 20–35 km of crust), and isostasy counts no more load on oceanic crust than this thickness gives: a thicker sediment pile stands where this one would.";
+        ocean_volume_layer_km: f64 = 0.0, 0.0..=10.0, "km", "Water of the ocean, as the depth of a layer over the whole globe (Earth: 1.335·10⁹ km³, a layer 2.62 km deep; Charette & Smith 2010). The sea level follows from it: after each isostasy pass the surface moves against the sea until the water below sea level has this volume, so shallower basins (young floor, arcs, sediment) or higher continents raise the sea and flood the lowest land, and deeper basins lower it (its shift is `sea_level_m` in summary.json). 0: the sea stays at the isostatic datum, whatever the water.";
     }
     /// Rivers: the drainage network, stream-power incision and hillslope diffusion.
     [rivers] Rivers {
@@ -956,7 +957,7 @@ mod tests {
     #[test]
     fn schema_is_consistent() {
         let schema = Params::schema();
-        assert_eq!(schema.len(), 100);
+        assert_eq!(schema.len(), 101);
         assert_eq!(schema.len(), BOUNDS.len());
         let mut seen = HashSet::new();
         for (spec, (lo, hi)) in schema.iter().zip(BOUNDS) {

@@ -43,6 +43,7 @@ pub mod drainage;
 pub mod graph;
 pub mod isostasy;
 pub mod network;
+pub mod sea_level;
 pub mod sediment;
 pub mod stream_power;
 
@@ -206,6 +207,9 @@ pub struct ReliefState {
     /// by the last isostasy pass. The fronts add it back to read the floor that arrives at
     /// the trench.
     pub trench_km: Vec<f32>,
+    /// Height of the sea above the isostatic datum from the last isostasy pass, km (0 unless
+    /// `isostasy.ocean_volume_layer_km` sets the water's volume; see [`sea_level`]).
+    pub sea_level_km: f64,
 }
 
 impl ReliefState {
@@ -288,6 +292,31 @@ pub fn lake_area_ratio(params: &Params) -> Option<f64> {
     let r = &params.rivers;
     (r.lake_net_evaporation_mm_per_yr > 0.0)
         .then(|| r.runoff_mm_per_yr / r.lake_net_evaporation_mm_per_yr)
+}
+
+/// With `isostasy.ocean_volume_layer_km` set: moves the isostatic surface of `crust` against
+/// the sea until the water below sea level has that volume, and returns the sea's height above
+/// the datum (km); None with the sea fixed at the datum (see [`sea_level`]).
+fn settle_sea_level(
+    ip: &crate::resources::params::Isostasy,
+    c: &crate::gpu::isostasy::IsostasyConstants,
+    g: &ReliefGraph,
+    crust: &mut Crust,
+) -> Option<f64> {
+    if ip.ocean_volume_layer_km <= 0.0 || crust.len() != g.len() {
+        return None;
+    }
+    let f = c.rho_mantle / (c.rho_mantle - c.rho_water);
+    let volume = ip.ocean_volume_layer_km * g.area_km2.iter().sum::<f64>();
+    let d = sea_level::solve_datum(
+        &crust.elevation_km,
+        &crust.crust_type,
+        &g.area_km2,
+        f,
+        volume,
+    );
+    sea_level::shift_surface(&mut crust.elevation_km, &crust.crust_type, f, d);
+    Some(-d)
 }
 
 /// Builds the drainage network of the current surface (phenomenon `drainage`).
@@ -772,6 +801,21 @@ pub fn apply_isostasy(
             ctx.note_device_write(crate::gpu::isostasy::WRITES, host)
         });
         if done {
+            // The sea level needs the whole surface: the elevation comes down, moves on the
+            // host, and goes up again (4 bytes a sample each way; only with a water volume).
+            if ip.ocean_volume_layer_km > 0.0
+                && let Some(declared) = before_write(
+                    &mut crust,
+                    &mut gpu,
+                    FieldMask::ELEVATION,
+                    FieldMask::ELEVATION,
+                )
+            {
+                if let Some(s) = settle_sea_level(ip, &c, g, &mut crust) {
+                    state.sea_level_km = s;
+                }
+                after_write(&crust, &mut gpu, FieldMask::ELEVATION, declared);
+            }
             return;
         }
         // The device failed (the step stops with the error): the host's combine instead, on
@@ -788,5 +832,8 @@ pub fn apply_isostasy(
         &state.trench_km,
         &mut host.elevation_km,
     );
+    if let Some(s) = settle_sea_level(ip, &c, g, host) {
+        state.sea_level_km = s;
+    }
     after_write(&crust, &mut gpu, FieldMask::ELEVATION, declared);
 }

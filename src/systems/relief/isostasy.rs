@@ -475,7 +475,15 @@ impl RegionalIsostasy {
         let use_coarse = matches!(&self.coarse, Some(cl) if cl.n_fine == n && (cl.sigma_km - sigma).abs() < 1e-9);
         if sigma > 0.0 && use_coarse {
             if let Some(cl) = self.coarse.as_mut() {
-                passes = cl.smooth(&root_of, &mut self.root);
+                // Each fine sample feeds about three coarse ones: its root is computed once,
+                // into the scratch buffer, rather than at each.
+                self.next
+                    .par_iter_mut()
+                    .enumerate()
+                    .with_min_len(8192)
+                    .for_each(|(i, r)| *r = root_of(i));
+                let roots = &self.next;
+                passes = cl.smooth(&|i| roots[i], &mut self.root);
             }
         } else {
             self.root

@@ -756,6 +756,10 @@ pub fn apply_isostasy(
                     return;
                 }
                 let d = sd as f64 - fp.converged_km[sp as usize] as f64;
+                let depth_here = trench_depth_on_mesh_km(d, depth, width, spacing);
+                if depth_here == 0.0 {
+                    return; // beyond the trench: no need to place the sample against its front
+                }
                 let faces = match (front[sp as usize], plate[i]) {
                     (Some((w, nrm)), pl) if pl != NO_PLATE => match table.get(pl) {
                         Some(s) => {
@@ -775,7 +779,7 @@ pub fn apply_isostasy(
                     _ => true,
                 };
                 if faces {
-                    *t = trench_depth_on_mesh_km(d, depth, width, spacing) as f32;
+                    *t = depth_here as f32;
                 }
             });
     }

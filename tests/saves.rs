@@ -527,6 +527,18 @@ fn inconsistent_sections_are_refused() {
     let bytes = save::save_to_bytes(&mut sim).unwrap();
     let e = load_err(&bytes);
     assert!(e.to_string().contains("age_my"), "{e}");
+    // A plate turning at an absurd (but finite) rate: its fronts' velocities would overflow
+    // in the first step (found by the mutation test below).
+    let mut sim = Simulation::new(small_params(2_000, 8)).unwrap();
+    let world = sim.world_mut();
+    let mut q = world.query::<&mut tectonic_planets::components::PlateMotion>();
+    q.iter_mut(world).next().unwrap().angular_speed_rad_per_my = -4.0e74;
+    let bytes = save::save_to_bytes(&mut sim).unwrap();
+    let e = load_err(&bytes);
+    assert!(
+        e.to_string().contains("angular speed") && e.to_string().contains("core.plates"),
+        "{e}"
+    );
 }
 
 /// Applies one random mutation; returns whether the checksum should be fixed afterwards.

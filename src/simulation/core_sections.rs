@@ -463,6 +463,11 @@ fn load_plates(world: &mut World, r: &mut SectionReader, _v: u32) -> Result<(), 
         let m = world.resource::<SphereMesh>();
         (m.len(), m.triangles.len())
     };
+    // No plate moves faster than ten times the fastest surface speed a parameter or a command
+    // allows (1,000 mm/yr): a finite but absurd rate would overflow the fronts' velocities.
+    let max_speed_rad_per_my = world
+        .get_resource::<crate::resources::params::Params>()
+        .map_or(f64::INFINITY, |p| 10.0 * 1000.0 / p.planet.radius_km);
     if n == 0 {
         return Err("no plates".into());
     }
@@ -483,6 +488,13 @@ fn load_plates(world: &mut World, r: &mut SectionReader, _v: u32) -> Result<(), 
         };
         if (motion.euler_pole.length() - 1.0).abs() > 1e-6 {
             return Err(format!("plate {id}: Euler pole is not a unit vector").into());
+        }
+        if motion.angular_speed_rad_per_my.abs() > max_speed_rad_per_my {
+            return Err(format!(
+                "plate {id}: angular speed {} rad/My is more than {max_speed_rad_per_my:.3} (ten times the fastest plate the parameters allow)",
+                motion.angular_speed_rad_per_my
+            )
+            .into());
         }
         let frame = PlateFrame {
             world_from_plate: DQuat::from_xyzw(f[4], f[5], f[6], f[7]),

@@ -465,10 +465,25 @@ impl SedimentRouter {
         b
     }
 
+    /// A fresh epoch of `pond_mark` (two values: the epoch and the epoch + 1).
+    fn fresh_epoch(&mut self) -> u32 {
+        self.pond_epoch = self.pond_epoch.wrapping_add(2);
+        if self.pond_epoch < 2 {
+            self.pond_mark.iter_mut().for_each(|m| *m = 0);
+            self.pond_epoch = 2;
+        }
+        self.pond_epoch
+    }
+
     /// Moves whatever would raise an ocean sample above `−coast_depth` to the nearest ocean
-    /// samples with room (breadth first from it, neighbours in CSR order; overfull samples in
-    /// the order they were touched). Conserves the volume; a remainder no ocean sample within
-    /// reach can take stays where it was.
+    /// samples with room. Overfull samples are held at that level; each connected region of
+    /// full sea (ocean samples without room) that holds some pools their excess, and spreads it
+    /// breadth first from the region's edge outward (the edge's samples with room in the order
+    /// the region's search found them, from its first overfull sample; neighbours in CSR
+    /// order). One search per region, not per overfull sample: a wide sea filled to the brim
+    /// was crossed again for every sample at its heart. Conserves the volume; what no ocean
+    /// sample within reach can take is laid over the region and what the spread crossed, in
+    /// proportion to area (a sea full to the brim, walled in by land).
     fn spread_overfull(
         &mut self,
         g: &ReliefGraph,
@@ -483,9 +498,10 @@ impl SedimentRouter {
             let z = if z.is_finite() { z as f64 } else { 0.0 };
             ((cap_level - z) * g.area_km2[j] / ff(j) - dep[j]).max(0.0)
         };
-        let mut queue: Vec<u32> = Vec::new();
-        let n_touched = self.touched.len();
-        for k in 0..n_touched {
+        // 1. The overfull samples, in the order they were touched, held at the cap.
+        let mut excess_of: std::collections::HashMap<u32, f64> = std::collections::HashMap::new();
+        let mut starts: Vec<u32> = Vec::new();
+        for k in 0..self.touched.len() {
             let i = self.touched[k] as usize;
             if !ocean[i] || self.dep[i] <= 0.0 {
                 continue;
@@ -493,25 +509,34 @@ impl SedimentRouter {
             let z = elevation_km[i];
             let z = if z.is_finite() { z as f64 } else { 0.0 };
             let cap = ((cap_level - z) * g.area_km2[i] / ff(i)).max(0.0);
-            let mut excess = self.dep[i] - cap;
+            let excess = self.dep[i] - cap;
             if excess <= 1e-9 * g.area_km2[i] {
                 continue;
             }
             self.dep[i] = cap;
-            // Breadth-first search over ocean samples; `pond_mark` with a fresh epoch marks
-            // the visited ones.
-            self.pond_epoch = self.pond_epoch.wrapping_add(2);
-            if self.pond_epoch < 2 {
-                self.pond_mark.iter_mut().for_each(|m| *m = 0);
-                self.pond_epoch = 2;
+            *excess_of.entry(i as u32).or_insert(0.0) += excess;
+            starts.push(i as u32);
+        }
+        let mut region: Vec<u32> = Vec::new();
+        let mut queue: Vec<u32> = Vec::new();
+        for &start in &starts {
+            // Pooled already with an earlier region.
+            let Some(e0) = excess_of.get_mut(&start).map(std::mem::take) else {
+                continue;
+            };
+            if e0 <= 0.0 {
+                continue;
             }
-            let seen = self.pond_epoch;
+            let mut excess = e0;
+            // 2. The full region around `start` (breadth first) and its edge with room.
+            let seen = self.fresh_epoch();
+            region.clear();
             queue.clear();
-            queue.push(i as u32);
-            self.pond_mark[i] = seen;
+            region.push(start);
+            self.pond_mark[start as usize] = seen;
             let mut head = 0;
-            while head < queue.len() && excess > 0.0 && head < 100_000 {
-                let u = queue[head] as usize;
+            while head < region.len() {
+                let u = region[head] as usize;
                 head += 1;
                 for e in g.edges(u) {
                     let j = g.neighbors[e] as usize;
@@ -519,27 +544,49 @@ impl SedimentRouter {
                         continue;
                     }
                     self.pond_mark[j] = seen;
-                    queue.push(j as u32);
-                    let r = room(&self.dep, j);
-                    if r > 0.0 {
-                        let v = r.min(excess);
-                        self.touch(j);
-                        self.dep[j] += v;
-                        excess -= v;
-                        if excess <= 0.0 {
-                            break;
+                    if room(&self.dep, j) > 0.0 {
+                        queue.push(j as u32);
+                    } else {
+                        region.push(j as u32);
+                        if let Some(x) = excess_of.get_mut(&(j as u32)) {
+                            excess += std::mem::take(x);
                         }
                     }
                 }
             }
+            // 3. Spread from the edge outward, filling what has room.
+            let mut head = 0;
+            while head < queue.len() && excess > 0.0 && head < 100_000 {
+                let u = queue[head] as usize;
+                head += 1;
+                let r = room(&self.dep, u);
+                if r > 0.0 {
+                    let v = r.min(excess);
+                    self.touch(u);
+                    self.dep[u] += v;
+                    excess -= v;
+                    if excess <= 0.0 {
+                        break;
+                    }
+                }
+                for e in g.edges(u) {
+                    let j = g.neighbors[e] as usize;
+                    if j == u || !ocean[j] || self.pond_mark[j] == seen {
+                        continue;
+                    }
+                    self.pond_mark[j] = seen;
+                    queue.push(j as u32);
+                }
+            }
             if excess > 0.0 {
-                // A sea full to the brim all round (walled in by land): a blanket over the
-                // whole of it, in proportion to area.
-                let total: f64 = queue.iter().map(|&j| g.area_km2[j as usize]).sum();
+                // Nowhere within reach has room: a blanket over the region and what the spread
+                // crossed, in proportion to area.
+                region.extend_from_slice(&queue);
+                let total: f64 = region.iter().map(|&j| g.area_km2[j as usize]).sum();
                 if total > 0.0 {
                     let mut given = 0.0;
-                    let last = queue.len() - 1;
-                    for (k, &j) in queue.iter().enumerate() {
+                    let last = region.len() - 1;
+                    for (k, &j) in region.iter().enumerate() {
                         let j = j as usize;
                         let v = if k == last {
                             excess - given
@@ -551,7 +598,7 @@ impl SedimentRouter {
                         self.dep[j] += v;
                     }
                 } else {
-                    self.dep[i] += excess;
+                    self.dep[start as usize] += excess;
                 }
             }
         }
@@ -588,12 +635,8 @@ impl SedimentRouter {
         ff: &dyn Fn(usize) -> f64,
     ) -> (Option<usize>, f64) {
         let ocean_cap = -p.coast_depth_km;
-        self.pond_epoch = self.pond_epoch.wrapping_add(2);
-        if self.pond_epoch < 2 {
-            self.pond_mark.iter_mut().for_each(|m| *m = 0);
-            self.pond_epoch = 2;
-        }
-        let (in_pond, in_heap) = (self.pond_epoch, self.pond_epoch + 1);
+        let in_pond = self.fresh_epoch();
+        let in_heap = in_pond + 1;
         let cur = |dep: &[f64], j: usize| -> f64 {
             let z = elevation_km[j];
             let z = if z.is_finite() { z as f64 } else { 0.0 };

@@ -240,6 +240,29 @@ mod tests {
     }
 
     #[test]
+    fn the_same_bits_with_one_thread_or_two() {
+        let f = 1.45;
+        let (z, t, a) = planet(200_000);
+        let v = 0.9 * ocean_volume_km3(&z, &a);
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| {
+                    let d = solve_datum(&z, &t, &a, f, v);
+                    let mut z2 = z.clone();
+                    shift_surface(&mut z2, &t, f, d);
+                    (
+                        d.to_bits(),
+                        z2.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                    )
+                })
+        };
+        assert_eq!(run(1), run(2));
+    }
+
+    #[test]
     fn a_rising_sea_floods_land_by_its_rise_and_deepens_the_floor_under_its_load() {
         let f = 1.5;
         let t = [

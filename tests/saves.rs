@@ -27,6 +27,22 @@ fn round_trip(sim: &mut Simulation) -> Simulation {
     save::load_from_bytes(&bytes, Path::new("<test>")).unwrap()
 }
 
+/// Runs `p` for `total` steps, saved and loaded after each step of `at`, and checks that every
+/// such run ends in the state of `straight` (a straight run of `total` steps).
+fn assert_resumes_exactly(p: &Params, total: u64, at: &[u64], straight: &mut Simulation) {
+    for &k in at {
+        let mut sim = Simulation::new(p.clone()).unwrap();
+        sim.run_steps(k).unwrap();
+        let mut resumed = round_trip(&mut sim);
+        resumed.run_steps(total - k).unwrap();
+        assert_eq!(
+            resumed.state_hash(),
+            straight.state_hash(),
+            "resumed at step {k}"
+        );
+    }
+}
+
 fn plate_meshes(sim: &mut Simulation) -> Vec<(u32, PlateMesh, PlateBounds, PlateStats)> {
     let world = sim.world_mut();
     let mut q = world.query::<(&Plate, &PlateMesh, &PlateBounds, &PlateStats)>();
@@ -1178,17 +1194,7 @@ fn a_run_with_plate_momentum_resumes_exactly() {
         sutures >= 1 && rifts >= 1,
         "{sutures} sutures, {rifts} rifts"
     );
-    for k in [17, 41] {
-        let mut sim = Simulation::new(p.clone()).unwrap();
-        sim.run_steps(k).unwrap();
-        let mut resumed = round_trip(&mut sim);
-        resumed.run_steps(TOTAL - k).unwrap();
-        assert_eq!(
-            resumed.state_hash(),
-            straight.state_hash(),
-            "resumed at step {k}"
-        );
-    }
+    assert_resumes_exactly(&p, TOTAL, &[17, 41], &mut straight);
 }
 
 /// A save made while a collided terrane waits on a plate of its own for its suture resumes to
@@ -1245,15 +1251,5 @@ fn a_run_with_a_fixed_water_volume_resumes_exactly() {
         (sea(&straight) - first).abs() > 1e-4,
         "the sea level stayed at {first} km"
     );
-    for k in [7, 13] {
-        let mut sim = Simulation::new(p.clone()).unwrap();
-        sim.run_steps(k).unwrap();
-        let mut resumed = round_trip(&mut sim);
-        resumed.run_steps(TOTAL - k).unwrap();
-        assert_eq!(
-            resumed.state_hash(),
-            straight.state_hash(),
-            "resumed at step {k}"
-        );
-    }
+    assert_resumes_exactly(&p, TOTAL, &[7, 13], &mut straight);
 }

@@ -1,6 +1,6 @@
 //! The command line of `planet`: the clap types shared by the commands, the dispatch, and the
 //! helpers every command uses (parameters, threads, backend, phenomenon switches). One module
-//! per command: [`run`] (generate, resume), [`export`], [`view`], [`bench`].
+//! per command: [`run`](mod@run) (generate, resume), [`export`](mod@export), [`view`](mod@view), [`bench`](mod@bench).
 
 pub(crate) mod bench;
 pub(crate) mod export;

@@ -22,6 +22,9 @@
 //!    on it (sediment, arcs: the thickness above `init.oceanic_thickness_km`) and lowered by the
 //!    flexure of neighbouring continents; a trench is cut in front of each active subduction
 //!    front. It runs last (after the sediment), so the maps show the compensated surface.
+//!    With `isostasy.ocean_volume_layer_km` set, the surface then moves against the sea until
+//!    the water has that volume ([`sea_level`]): the sea rises over the land when the basins
+//!    fill.
 //!
 //! With isostasy on, **every change of elevation goes through thickness**: subduction and
 //! collision thicken the crust (the paper's uplift rates read as the surface rise before

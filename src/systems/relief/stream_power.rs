@@ -36,7 +36,7 @@ use super::graph::ReliefGraph;
 /// Parameters of [`stream_power_erode`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StreamPowerParams {
-    /// Erodibility K in km^(1−2m)/My, so that E [km/My] = K·A[km²]^m·S^n. Conversion from
+    /// Erodibility K in km^(1−2m)/My, so that E [km/My] = K·A\[km²\]^m·S^n. Conversion from
     /// SI (m^(1−2m)/yr): K = K_SI·10^(3+6m); for m = 0.5, K_SI = 1e−6/yr ↔ K = 1/My.
     pub k: f64,
     /// Area exponent m (dimensionless).

@@ -158,6 +158,18 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
         }
         println!("  {:<26} {:>10.3} ms", set.name(), m);
     }
+    // The relief issue's budget is for these five together (40 ms a step at 500k).
+    let relief: f64 = [
+        TectonicSystems::Drainage,
+        TectonicSystems::Rivers,
+        TectonicSystems::Coasts,
+        TectonicSystems::Sediment,
+        TectonicSystems::Isostasy,
+    ]
+    .iter()
+    .filter_map(|set| sim.timings().median_ms(set.name()))
+    .sum();
+    println!("  {:<26} {:>10.3} ms", "relief sets (sum)", relief);
     println!("drainage, by pass (median):");
     for (label, name) in [
         ("sea mask", "drainage_sea_mask"),

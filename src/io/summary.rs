@@ -120,7 +120,9 @@ pub fn summarize(sim: &Simulation, view: &Crust) -> Summary {
 
 /// [`Hypsometry::sea_level_m`] of the live isostasy: None with the sea fixed at the datum.
 fn sea_level_m(sim: &Simulation) -> Option<f64> {
-    (sim.params().isostasy.ocean_volume_layer_km > 0.0).then_some(())?;
+    if sim.params().isostasy.ocean_volume_layer_km <= 0.0 {
+        return None;
+    }
     let state = sim
         .world()
         .get_resource::<crate::systems::relief::ReliefState>()?;

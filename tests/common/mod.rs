@@ -178,11 +178,9 @@ pub fn random_crust(
 /// The water below sea level on `sim`'s surface, as the depth of a layer over the whole globe
 /// (km): Σ a·max(0, −z) / Σ a.
 pub fn water_layer_km(sim: &Simulation) -> f64 {
-    let (c, mesh) = (sim.crust(), sim.mesh());
-    let total: f64 = mesh.area_km2.iter().sum();
-    let v: f64 = (0..c.len())
-        .filter(|&i| c.elevation_km[i] < 0.0)
-        .map(|i| -(c.elevation_km[i] as f64) * mesh.area_km2[i])
-        .sum();
-    v / total
+    let mesh = sim.mesh();
+    tectonic_planets::systems::relief::sea_level::ocean_volume_km3(
+        &sim.crust().elevation_km,
+        &mesh.area_km2,
+    ) / mesh.total_area_km2()
 }

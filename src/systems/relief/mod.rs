@@ -310,7 +310,7 @@ fn settle_sea_level(
         return None;
     }
     let f = c.rho_mantle / (c.rho_mantle - c.rho_water);
-    let volume = ip.ocean_volume_layer_km * g.area_km2.iter().sum::<f64>();
+    let volume = ip.ocean_volume_layer_km * g.total_area_km2();
     let d = sea_level::solve_datum(
         &crust.elevation_km,
         &crust.crust_type,

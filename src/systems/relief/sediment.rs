@@ -493,11 +493,13 @@ impl SedimentRouter {
         ff: &dyn Fn(usize) -> f64,
     ) {
         let cap_level = -p.coast_depth_km;
-        let room = |dep: &[f64], j: usize| -> f64 {
+        // Volume (km³) a sample holds up to −coast depth, and what is left of it.
+        let cap = |j: usize| -> f64 {
             let z = elevation_km[j];
             let z = if z.is_finite() { z as f64 } else { 0.0 };
-            ((cap_level - z) * g.area_km2[j] / ff(j) - dep[j]).max(0.0)
+            ((cap_level - z) * g.area_km2[j] / ff(j)).max(0.0)
         };
+        let room = |dep: &[f64], j: usize| -> f64 { (cap(j) - dep[j]).max(0.0) };
         // 1. The overfull samples, in the order they were touched, held at the cap.
         let mut excess_of: std::collections::HashMap<u32, f64> = std::collections::HashMap::new();
         let mut starts: Vec<u32> = Vec::new();
@@ -506,9 +508,7 @@ impl SedimentRouter {
             if !ocean[i] || self.dep[i] <= 0.0 {
                 continue;
             }
-            let z = elevation_km[i];
-            let z = if z.is_finite() { z as f64 } else { 0.0 };
-            let cap = ((cap_level - z) * g.area_km2[i] / ff(i)).max(0.0);
+            let cap = cap(i);
             let excess = self.dep[i] - cap;
             if excess <= 1e-9 * g.area_km2[i] {
                 continue;

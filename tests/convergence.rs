@@ -87,6 +87,10 @@ fn ocean_under_continent_makes_a_trench_and_an_andean_range() {
         |_| continent(0.3),
         |_| ocean(-4.5, 100.0),
     );
+    // A continent as wide as a hemisphere has a desert for an interior, which barely erodes
+    // and can stand higher than the wet coastal range: this test reads the uplift's profile,
+    // under uniform rain.
+    sim.set_enabled("climate", false).unwrap();
     {
         let mut q = sim.world_mut().query::<&SubductionFront>();
         let fronts: Vec<SubductionFront> = q.iter(sim.world()).cloned().collect();

@@ -142,6 +142,7 @@ fn drainage_geotiffs_hold_the_area_and_basins_that_follow_the_receivers() {
         NetworkOptions {
             min_sea_area_km2: 250_000.0,
             lake_area_ratio: None,
+            climate: None,
         },
     );
     let d = &net.drainage;

@@ -285,3 +285,63 @@ fn the_ocean_keeps_its_water_volume_and_the_sea_level_follows() {
         None
     );
 }
+
+/// The climate writes the rain the drainage weighs its areas with (relative, about 1 on average
+/// over the land, dry and wet places far apart); switched off, the rain is uniform again.
+#[test]
+fn the_climate_sets_the_rain_of_the_drainage_and_switched_off_leaves_it_uniform() {
+    use tectonic_planets::systems::relief::{DrainageNetwork, Precipitation};
+    let mut sim = Simulation::new(small_params(10_000, 2)).unwrap();
+    sim.run_steps(6).unwrap();
+    let min_rain = sim.params().climate.min_rain as f32;
+    let land_area = |sim: &Simulation, i: usize| {
+        let d = &sim.world().resource::<DrainageNetwork>().drainage;
+        (!d.ocean[i]).then(|| sim.mesh().area_km2[i])
+    };
+    let rain = sim.world().resource::<Precipitation>().0.clone();
+    let n = sim.mesh().len();
+    assert_eq!(rain.len(), n, "one value per sample");
+    let (mut sum, mut area, mut lo, mut hi) = (0.0, 0.0, f32::INFINITY, 0.0f32);
+    let mut below_own_cell = 0;
+    for i in 0..n {
+        let Some(a) = land_area(&sim, i) else {
+            continue;
+        };
+        let r = rain[i];
+        assert!(r.is_finite() && r >= min_rain, "sample {i}: rain {r}");
+        sum += f64::from(r) * a;
+        area += a;
+        lo = lo.min(r);
+        hi = hi.max(r);
+        // A dry sample that no other drains into gathers less than its own cell's area.
+        let d = &sim.world().resource::<DrainageNetwork>().drainage;
+        if d.area_km2[i] < 0.5 * a {
+            below_own_cell += 1;
+        }
+    }
+    let mean = sum / area;
+    assert!((0.95..1.2).contains(&mean), "land mean rain {mean}");
+    assert!(
+        hi > 5.0 * lo,
+        "rain from {lo} to {hi}: no dry or wet places"
+    );
+    assert!(
+        below_own_cell > 0,
+        "the drainage areas are not weighted by the rain"
+    );
+    // Switched off: uniform rain, every land sample gathers at least its own cell.
+    sim.set_enabled("climate", false).unwrap();
+    sim.step().unwrap();
+    assert!(sim.world().resource::<Precipitation>().0.is_empty());
+    let d = &sim.world().resource::<DrainageNetwork>().drainage;
+    for i in 0..n {
+        if !d.ocean[i] {
+            assert!(
+                d.area_km2[i] >= sim.mesh().area_km2[i] * (1.0 - 1e-9),
+                "sample {i}: area {} under its cell's {}",
+                d.area_km2[i],
+                sim.mesh().area_km2[i]
+            );
+        }
+    }
+}

@@ -11,7 +11,7 @@ use tectonic_planets::Simulation;
 use tectonic_planets::commands::{Outcome, Script};
 use tectonic_planets::gpu::BackendChoice;
 use tectonic_planets::io::maps::{Raster, write_all_maps};
-use tectonic_planets::io::rivers::{NetworkOptions, RiverNetwork, write_rivers};
+use tectonic_planets::io::rivers::{RiverNetwork, write_rivers};
 use tectonic_planets::io::save::{self, CommandHistory, SaveError};
 use tectonic_planets::io::summary::{CrustSampler, summarize};
 
@@ -426,7 +426,7 @@ pub(crate) fn write_outputs(sim: &mut Simulation, out: &Path, width: u32) -> Res
     )?;
     let radius_km = sim.params().planet.radius_km;
     let mut files = write_all_maps(&raster, out, radius_km)?;
-    let rivers = RiverNetwork::of(sim.mesh(), &view, NetworkOptions::of(sim.params()));
+    let rivers = RiverNetwork::of(sim.mesh(), &view, sim.network_options());
     files.extend(write_rivers(&raster, sim.mesh(), &rivers, out, radius_km)?);
     let mut summary = summarize(sim, &view);
     summary.drainage = Some(rivers.summary(sim.mesh()));

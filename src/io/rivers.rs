@@ -1,6 +1,7 @@
 //! Rivers for the outputs: `rivers.png` (rivers and lakes over the shaded relief of
-//! elevation.png) and `rivers.geojson` (one line per river reach), from the drainage network of
-//! the resampled crust ([`RiverNetwork`]).
+//! elevation.png), `rivers.geojson` (one line per river reach) and, with the climate on,
+//! `precipitation.png` (the rain the drainage areas are weighted with), from the drainage
+//! network of the resampled crust ([`RiverNetwork`]).
 //!
 //! Rivers are the land samples whose drainage area is at least the threshold of
 //! [`river_threshold_km2`] (50,000 km² on a fine planet). Each is drawn from its sample to its
@@ -22,7 +23,7 @@ use crate::systems::relief::drainage::Drainage;
 use crate::systems::relief::graph::ReliefGraph;
 pub use crate::systems::relief::network::NetworkOptions;
 use crate::systems::relief::network::{
-    Reach, basin_outlets, network_of, relief_graph, river_reaches, river_threshold_km2,
+    Reach, basin_outlets, network_of, rain_of, relief_graph, river_reaches, river_threshold_km2,
 };
 
 /// Colour of rivers (sRGB).
@@ -48,6 +49,9 @@ pub struct RiverNetwork {
     pub outlets: Vec<u32>,
     /// The river reaches above the threshold.
     pub reaches: Vec<Reach>,
+    /// Relative rain per sample the drainage areas were weighted with (the phenomenon
+    /// `climate`'s field; empty: uniform rain).
+    pub rain: Vec<f32>,
     /// The threshold, km² of drainage area.
     pub min_area_km2: f64,
 }
@@ -57,12 +61,19 @@ impl RiverNetwork {
     /// and lakes as in the simulation (`opts`: [`NetworkOptions::of`] the run's parameters) and
     /// the threshold of [`river_threshold_km2`].
     pub fn of(mesh: &SphereMesh, crust: &Crust, opts: NetworkOptions) -> Self {
-        Self::on_graph(&relief_graph(mesh), crust, opts)
+        Self::on_graph(&relief_graph(mesh), &mesh.positions, crust, opts)
     }
 
-    /// [`Self::of`] on a sample graph already built (see [`relief_graph`]).
-    pub fn on_graph(g: &ReliefGraph, crust: &Crust, opts: NetworkOptions) -> Self {
-        let drainage = network_of(g, crust, opts);
+    /// [`Self::of`] on a sample graph already built (see [`relief_graph`]; `positions`: its
+    /// unit positions).
+    pub fn on_graph(
+        g: &ReliefGraph,
+        positions: &[DVec3],
+        crust: &Crust,
+        opts: NetworkOptions,
+    ) -> Self {
+        let rain = rain_of(g, positions, crust, opts);
+        let drainage = network_of(g, crust, opts, Some(&rain));
         let min_area_km2 = river_threshold_km2(g.total_area_km2(), g.len());
         let reaches = river_reaches(&drainage, min_area_km2);
         let outlets = basin_outlets(&drainage);
@@ -71,6 +82,7 @@ impl RiverNetwork {
             outlets,
             reaches,
             min_area_km2,
+            rain,
         }
     }
 
@@ -364,6 +376,65 @@ pub fn rivers_image(
     img
 }
 
+/// Colour of relative rain `r` (1 = the land's mean) on land: tan deserts (a tenth of the mean
+/// or less), yellow-green steppe, green at the mean, dark green and blue-green where it rains
+/// several times the mean; log scale.
+pub fn rain_colour(r: f32) -> [u8; 3] {
+    const STOPS: [(f32, [f32; 3]); 5] = [
+        (-3.3, [232.0, 208.0, 150.0]),
+        (-1.0, [205.0, 195.0, 110.0]),
+        (0.0, [110.0, 170.0, 80.0]),
+        (1.0, [40.0, 120.0, 60.0]),
+        (2.0, [30.0, 90.0, 135.0]),
+    ];
+    let x = if r > 0.0 { r.log2() } else { -10.0 };
+    let x = x.clamp(STOPS[0].0, STOPS[4].0);
+    let k = STOPS.windows(2).position(|w| x <= w[1].0).unwrap_or(3);
+    let ((x0, c0), (x1, c1)) = (STOPS[k], STOPS[k + 1]);
+    let t = ((x - x0) / (x1 - x0)).clamp(0.0, 1.0);
+    std::array::from_fn(|i| (c0[i] + t * (c1[i] - c0[i])).round() as u8)
+}
+
+/// The rain map (`precipitation.png`): the network's rain ([`RiverNetwork::rain`]) over the
+/// land in [`rain_colour`], the sea dark blue, rivers on top; `None` with uniform rain.
+pub fn rain_image(raster: &Raster, mesh: &SphereMesh, net: &RiverNetwork) -> Option<RgbImage> {
+    use rayon::prelude::*;
+    if net.rain.len() != mesh.len() || net.len() != mesh.len() {
+        return None;
+    }
+    let (w, h) = (raster.width, raster.height);
+    let mut px = vec![[0u8; 3]; w as usize * h as usize];
+    px.par_chunks_mut((w as usize).max(1))
+        .enumerate()
+        .for_each(|(row, line)| {
+            let mut hint = u32::MAX;
+            for (col, o) in line.iter_mut().enumerate() {
+                let k = row * w as usize + col;
+                if raster.samples.get(k).is_none_or(|s| s.elevation_m <= 0.0) {
+                    *o = [28, 52, 86];
+                    continue;
+                }
+                let d = DVec3::from_array(Raster::pixel_direction(w, h, col as u32, row as u32));
+                let loc = crate::amplify::hinted_locate(mesh, d, hint);
+                hint = loc.triangle;
+                let r: f64 = mesh
+                    .triangles
+                    .get(loc.triangle as usize)
+                    .map(|t| {
+                        t.iter()
+                            .zip(loc.weights)
+                            .map(|(&s, wt)| wt * f64::from(net.rain[s as usize]))
+                            .sum()
+                    })
+                    .unwrap_or(1.0);
+                *o = rain_colour(r as f32);
+            }
+        });
+    let mut img = RgbImage::from_fn(w, h, |c, r| image::Rgb(px[(r * w + c) as usize]));
+    draw_rivers(&mut img, &mesh.positions, net);
+    Some(img)
+}
+
 /// [lon, lat] in degrees, rounded to [`COORD_SCALE`].
 fn lon_lat(lon: f64, lat: f64) -> [f64; 2] {
     let r = |v: f64| (v * COORD_SCALE).round() / COORD_SCALE;
@@ -451,7 +522,8 @@ pub fn rivers_geojson(positions: &[DVec3], net: &RiverNetwork) -> Value {
     })
 }
 
-/// Writes `rivers.png` (see [`rivers_image`]) and `rivers.geojson` (see [`rivers_geojson`])
+/// Writes `rivers.png` (see [`rivers_image`]), `rivers.geojson` (see [`rivers_geojson`]) and,
+/// with rain, `precipitation.png` (see [`rain_image`])
 /// into `dir`; returns their paths.
 pub fn write_rivers(
     raster: &Raster,
@@ -479,7 +551,16 @@ pub fn write_rivers(
         path: geo.clone(),
         source,
     })?;
-    Ok(vec![png, geo])
+    let mut files = vec![png, geo];
+    if let Some(img) = rain_image(raster, mesh, net) {
+        let path = dir.join("precipitation.png");
+        img.save(&path).map_err(|source| MapError::Image {
+            path: path.clone(),
+            source,
+        })?;
+        files.push(path);
+    }
+    Ok(files)
 }
 
 #[cfg(test)]

@@ -3,6 +3,7 @@
 //! sections. [`TectonicPlugins`] lists the group.
 
 pub mod aging;
+pub mod climate;
 pub mod coasts;
 pub mod collision;
 pub mod convergence_state;
@@ -25,6 +26,7 @@ pub mod terranes;
 use bevy_app::{PluginGroup, PluginGroupBuilder};
 
 pub use aging::AgingPlugin;
+pub use climate::ClimatePlugin;
 pub use coasts::CoastsPlugin;
 pub use collision::CollisionPlugin;
 pub use diagnostics::DiagnosticsPlugin;
@@ -59,6 +61,7 @@ impl PluginGroup for TectonicPlugins {
             .add(DriftPlugin)
             .add(SubductionPlugin)
             .add(ErosionPlugin)
+            .add(ClimatePlugin)
             .add(DrainagePlugin)
             .add(RiversPlugin)
             .add(CoastsPlugin)

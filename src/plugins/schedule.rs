@@ -6,19 +6,20 @@
 //! 3. [`TectonicSystems::Subduction`]: uplift at converging boundaries.
 //! 4. [`TectonicSystems::Erosion`]: the paper's continental erosion, oceanic damping and
 //!    sediment accretion (off by default: the relief phenomena below replace it).
-//! 5. [`TectonicSystems::Drainage`]: the drainage network of the surface.
-//! 6. [`TectonicSystems::Rivers`]: stream-power incision and hillslope diffusion.
-//! 7. [`TectonicSystems::Coasts`]: waves cut back the coasts.
-//! 8. [`TectonicSystems::Sediment`]: what was eroded is laid down.
-//! 9. [`TectonicSystems::Isostasy`]: the elevation follows from the crust (thickness, age).
-//! 10. [`TectonicSystems::SlabPull`]: subducting plates turn toward their fronts.
-//! 11. [`TectonicSystems::Rifting`]: plates break apart.
-//! 12. [`TectonicSystems::Aging`]: crust and orogenies age (the clock first, then the crust,
+//! 5. [`TectonicSystems::Climate`]: rain over the land from the winds.
+//! 6. [`TectonicSystems::Drainage`]: the drainage network of the surface.
+//! 7. [`TectonicSystems::Rivers`]: stream-power incision and hillslope diffusion.
+//! 8. [`TectonicSystems::Coasts`]: waves cut back the coasts.
+//! 9. [`TectonicSystems::Sediment`]: what was eroded is laid down.
+//! 10. [`TectonicSystems::Isostasy`]: the elevation follows from the crust (thickness, age).
+//! 11. [`TectonicSystems::SlabPull`]: subducting plates turn toward their fronts.
+//! 12. [`TectonicSystems::Rifting`]: plates break apart.
+//! 13. [`TectonicSystems::Aging`]: crust and orogenies age (the clock first, then the crust,
 //!     then plugins that build on this step's ages: [`AgingSystems`]).
-//! 13. [`TectonicSystems::Resample`]: global resampling when due, in three chained sub-sets
+//! 14. [`TectonicSystems::Resample`]: global resampling when due, in three chained sub-sets
 //!     ([`ResampleSystems::Interpolate`], [`ResampleSystems::FillGaps`],
 //!     [`ResampleSystems::Rebuild`]).
-//! 14. [`TectonicSystems::Diagnostics`]: statistics and checks.
+//! 15. [`TectonicSystems::Diagnostics`]: statistics and checks.
 //!
 //! After every global resampling the [`AfterResample`] schedule rebuilds what depends on the
 //! plates ([`AfterResampleSystems`]: collision uplift, terranes, fronts, then plugin state
@@ -74,6 +75,8 @@ pub enum TectonicSystems {
     Subduction,
     /// The paper's erosion, damping, sediment accretion.
     Erosion,
+    /// Rain over the land.
+    Climate,
     /// The drainage network.
     Drainage,
     /// River incision and hillslope diffusion.
@@ -98,11 +101,12 @@ pub enum TectonicSystems {
 
 impl TectonicSystems {
     /// Every set, in step order.
-    pub const ALL: [TectonicSystems; 14] = [
+    pub const ALL: [TectonicSystems; 15] = [
         Self::Collision,
         Self::Drift,
         Self::Subduction,
         Self::Erosion,
+        Self::Climate,
         Self::Drainage,
         Self::Rivers,
         Self::Coasts,
@@ -121,6 +125,7 @@ impl TectonicSystems {
             Self::Drift => "drift",
             Self::Subduction => "subduction",
             Self::Erosion => "erosion",
+            Self::Climate => "climate",
             Self::Drainage => "drainage",
             Self::Rivers => "rivers",
             Self::Coasts => "coasts",

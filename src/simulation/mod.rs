@@ -476,6 +476,23 @@ impl Simulation {
         PlateTable::from_plates(q.iter(world).map(|(p, m, f, b, s)| (*p, *m, *f, *b, *s)))
     }
 
+    /// What decides the sea, the lakes and the rain of the drainage network the maps draw, as
+    /// in this run: [`NetworkOptions::of`] its parameters, with uniform rain when its
+    /// phenomenon `climate` is off.
+    pub fn network_options(&self) -> crate::systems::relief::network::NetworkOptions {
+        let opts = crate::systems::relief::network::NetworkOptions::of(self.params());
+        let climate_on = self
+            .app
+            .world()
+            .resource::<Phenomena>()
+            .is_enabled(crate::plugins::climate::CLIMATE.name());
+        if climate_on {
+            opts
+        } else {
+            opts.without_climate()
+        }
+    }
+
     /// The crust as it would be after a resampling now, without changing the simulation: every
     /// field on the reference mesh in the world frame, gaps filled with new ocean floor (when the
     /// `oceanic_crust` phenomenon is on). This is what maps and exports show. (Unlike a real

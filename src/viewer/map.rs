@@ -40,11 +40,13 @@ pub enum BaseLayer {
     Basins,
     /// Crust thickness.
     Thickness,
+    /// Relative rain over the land (the phenomenon `climate`), rivers on top.
+    Rain,
 }
 
 impl BaseLayer {
     /// Every base layer, in menu order.
-    pub const ALL: [BaseLayer; 10] = [
+    pub const ALL: [BaseLayer; 11] = [
         Self::Elevation,
         Self::Plates,
         Self::CrustType,
@@ -55,6 +57,7 @@ impl BaseLayer {
         Self::Rivers,
         Self::Basins,
         Self::Thickness,
+        Self::Rain,
     ];
     /// Menu label.
     pub fn label(self) -> &'static str {
@@ -69,6 +72,7 @@ impl BaseLayer {
             Self::Rivers => "Rivers",
             Self::Basins => "Drainage basins",
             Self::Thickness => "Crust thickness",
+            Self::Rain => "Rain",
         }
     }
 }
@@ -76,7 +80,7 @@ impl BaseLayer {
 impl std::str::FromStr for BaseLayer {
     type Err = String;
     /// A layer by name (`elevation`, `plates`, `crust_type`, `oceanic_age`, `orogeny_type`,
-    /// `orogeny_age`, `laplacian`, `rivers`, `basins`, `thickness`).
+    /// `orogeny_age`, `laplacian`, `rivers`, `basins`, `thickness`, `rain`).
     fn from_str(s: &str) -> Result<Self, String> {
         let names = [
             "elevation",
@@ -89,6 +93,7 @@ impl std::str::FromStr for BaseLayer {
             "rivers",
             "basins",
             "thickness",
+            "rain",
         ];
         names
             .iter()
@@ -231,6 +236,7 @@ pub fn render_base(s: &Snapshot, layer: BaseLayer) -> ColorImage {
         BaseLayer::Laplacian => laplacian_image(s),
         BaseLayer::Rivers => rivers_image(s),
         BaseLayer::Basins => basins_image(s),
+        BaseLayer::Rain => rain_image(s),
         BaseLayer::Thickness => {
             const STOPS: [(f32, [u8; 3]); 6] = [
                 (0.0, [10, 20, 60]),
@@ -261,6 +267,30 @@ fn rivers_image(s: &Snapshot) -> ColorImage {
         rivers::paint_lakes(&mut img, |c, r| {
             lk.lerp(&lake, r as usize * w + c as usize) >= 0.5
         });
+        rivers::draw_rivers(&mut img, &s.positions, net);
+    }
+    rgb_to_color_image(img)
+}
+
+/// The rain over the land (as precipitation.png; see [`rivers::rain_image`]): the snapshot's
+/// drainage network's rain in [`rivers::rain_colour`], the sea dark, rivers on top; uniform
+/// rain shows the mean's colour.
+fn rain_image(s: &Snapshot) -> ColorImage {
+    let net = s.rivers();
+    let lk = &s.lookup;
+    let uniform = net.rain.len() != s.positions.len();
+    let mut img = image::RgbImage::new(lk.width, lk.height);
+    for (k, px) in img.pixels_mut().enumerate() {
+        let sea = lk.lerp(&s.crust.elevation_km, k) <= 0.0;
+        px.0 = if sea {
+            [BASIN_SEA.r(), BASIN_SEA.g(), BASIN_SEA.b()]
+        } else if uniform {
+            rivers::rain_colour(1.0)
+        } else {
+            rivers::rain_colour(lk.lerp(&net.rain, k))
+        };
+    }
+    if net.len() == s.positions.len() {
         rivers::draw_rivers(&mut img, &s.positions, net);
     }
     rgb_to_color_image(img)

@@ -373,7 +373,12 @@ fn the_rivers_basins_and_thickness_overlays_render() {
     let drawn = |h: &Harness| map::image_hash(h.app.map_image.as_ref().expect("a map is drawn"));
     let elevation = map::render_base(&snap, BaseLayer::Elevation);
     let mut hashes = std::collections::HashSet::new();
-    for layer in [BaseLayer::Rivers, BaseLayer::Basins, BaseLayer::Thickness] {
+    for layer in [
+        BaseLayer::Rivers,
+        BaseLayer::Basins,
+        BaseLayer::Thickness,
+        BaseLayer::Rain,
+    ] {
         h.click(&format!("overlay:{}", layer.label()));
         h.frame(Vec::new());
         assert_eq!(h.app.base, layer);

@@ -285,7 +285,12 @@ impl Snapshot {
     /// time it is asked for (by whoever draws a layer that needs it).
     pub fn rivers(&self) -> &RiverNetwork {
         self.rivers.get_or_init(|| {
-            RiverNetwork::on_graph(&self.graph, &self.crust, NetworkOptions::of(&self.params))
+            RiverNetwork::on_graph(
+                &self.graph,
+                &self.positions,
+                &self.crust,
+                NetworkOptions::of(&self.params),
+            )
         })
     }
 }
@@ -717,8 +722,13 @@ impl Worker {
                     let radius_km = self.sim.params().planet.radius_km;
                     let mut files =
                         write_all_maps(&raster, &dir, radius_km).map_err(|e| e.to_string())?;
-                    let opts = NetworkOptions::of(self.sim.params());
-                    let rivers = RiverNetwork::on_graph(&self.graph, &view, opts);
+                    let opts = self.sim.network_options();
+                    let rivers = RiverNetwork::on_graph(
+                        &self.graph,
+                        &self.sim.mesh().positions,
+                        &view,
+                        opts,
+                    );
                     files.extend(
                         write_rivers(&raster, self.sim.mesh(), &rivers, &dir, radius_km)
                             .map_err(|e| e.to_string())?,

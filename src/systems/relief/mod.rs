@@ -40,6 +40,7 @@
 //! plates have moved, so an edge across a boundary joins samples that are no longer side by side;
 //! few rivers cross a boundary, and the next resampling puts the samples back in place.
 
+pub mod climate;
 pub mod coast;
 pub mod diffusion;
 pub mod drainage;
@@ -320,6 +321,67 @@ fn settle_sea_level(
     );
     sea_level::shift_surface(&mut crust.elevation_km, &crust.crust_type, f, d);
     Some(-d)
+}
+
+/// The climate's parameters from `params`.
+pub fn climate_params(params: &Params) -> climate::ClimateParams {
+    let c = &params.climate;
+    climate::ClimateParams {
+        moisture_length_km: c.moisture_length_km,
+        wind_anisotropy: c.wind_anisotropy,
+        orographic_height_km: c.orographic_height_km,
+        windward_slope: c.windward_slope,
+        min_rain: c.min_rain,
+    }
+}
+
+/// Scratch of the climate, and whether [`Precipitation`] holds its field (a resource).
+#[derive(Resource, Default)]
+pub struct ClimateState {
+    scratch: climate::ClimateScratch,
+    /// True while [`Precipitation`] holds the field [`update_climate`] wrote.
+    pub wrote: bool,
+}
+
+/// Rain over the land from the current surface into [`Precipitation`] (phenomenon `climate`;
+/// see [`climate`]).
+pub fn update_climate(
+    params: Res<Params>,
+    mesh: Res<SphereMesh>,
+    mut crust: ResMut<Crust>,
+    mut state: ResMut<ReliefState>,
+    mut cs: ResMut<ClimateState>,
+    mut rain: ResMut<Precipitation>,
+    mut gpu: Option<ResMut<GpuContext>>,
+) {
+    if !pull(&mut crust, &mut gpu, FieldMask::ELEVATION) {
+        return;
+    }
+    if ensure_graph(&mut state.graph, &mesh) {
+        state.iso_key = None;
+    }
+    let Some(g) = state.graph.as_ref() else {
+        return;
+    };
+    let cs = &mut *cs;
+    climate::precipitation(
+        g,
+        &mesh.positions,
+        &crust.elevation_km,
+        &climate_params(&params),
+        &mut rain.0,
+        &mut cs.scratch,
+    );
+    cs.wrote = true;
+}
+
+/// With the climate switched off: the rain it wrote goes, so the drainage sees uniform rain
+/// again (a field another plugin set stays).
+pub fn clear_climate(mut cs: ResMut<ClimateState>, mut rain: ResMut<Precipitation>) {
+    if cs.wrote {
+        rain.0.clear();
+        cs.wrote = false;
+    }
 }
 
 /// Builds the drainage network of the current surface (phenomenon `drainage`).

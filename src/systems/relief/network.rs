@@ -60,22 +60,62 @@ pub struct NetworkOptions {
     pub min_sea_area_km2: f64,
     /// Water balance of closed lakes (see [`Drainage::lake_area_ratio`]).
     pub lake_area_ratio: Option<f64>,
+    /// The rain of the phenomenon `climate` ([`super::climate`]); `None`: uniform rain.
+    pub climate: Option<super::climate::ClimateParams>,
 }
 
 impl NetworkOptions {
-    /// The options the simulation uses with `params`.
+    /// The options the simulation uses with `params`, the climate on (its default; see
+    /// [`Self::without_climate`]).
     pub fn of(params: &crate::resources::Params) -> Self {
         Self {
             min_sea_area_km2: params.rivers.min_sea_area_km2,
             lake_area_ratio: super::lake_area_ratio(params),
+            climate: Some(super::climate_params(params)),
+        }
+    }
+
+    /// The same with uniform rain (the phenomenon `climate` switched off).
+    pub fn without_climate(self) -> Self {
+        Self {
+            climate: None,
+            ..self
         }
     }
 }
 
-/// The drainage network of `crust` on graph `g` (uniform rain): the sea is the oceanic bodies of
-/// water of at least `opts.min_sea_area_km2`, the lakes balanced as `opts` says, as in the
-/// simulation. Give it the resampled crust (world frame, reference mesh) to map it.
-pub fn network_of(g: &ReliefGraph, crust: &Crust, opts: NetworkOptions) -> Drainage {
+/// The rain of `opts.climate` over `crust` on graph `g` (`positions`: the graph's unit
+/// positions); empty with uniform rain.
+pub fn rain_of(
+    g: &ReliefGraph,
+    positions: &[glam::DVec3],
+    crust: &Crust,
+    opts: NetworkOptions,
+) -> Vec<f32> {
+    let mut rain = Vec::new();
+    if let Some(c) = opts.climate {
+        super::climate::precipitation(
+            g,
+            positions,
+            &crust.elevation_km,
+            &c,
+            &mut rain,
+            &mut super::climate::ClimateScratch::default(),
+        );
+    }
+    rain
+}
+
+/// The drainage network of `crust` on graph `g`: the sea is the oceanic bodies of water of at
+/// least `opts.min_sea_area_km2`, the lakes balanced as `opts` says, drainage areas weighted by
+/// `rain` (relative, one value per sample; `None` or empty: uniform), as in the simulation. Give
+/// it the resampled crust (world frame, reference mesh) to map it.
+pub fn network_of(
+    g: &ReliefGraph,
+    crust: &Crust,
+    opts: NetworkOptions,
+    rain: Option<&[f32]>,
+) -> Drainage {
     let oceanic: Vec<bool> = crust
         .crust_type
         .iter()
@@ -91,7 +131,8 @@ pub fn network_of(g: &ReliefGraph, crust: &Crust, opts: NetworkOptions) -> Drain
     );
     let mut d = Drainage::new();
     d.lake_area_ratio = opts.lake_area_ratio;
-    d.compute(g, &crust.elevation_km, &ocean, None);
+    let rain = rain.filter(|r| r.len() == g.len());
+    d.compute(g, &crust.elevation_km, &ocean, rain);
     d
 }
 
@@ -314,7 +355,9 @@ mod tests {
             NetworkOptions {
                 min_sea_area_km2: 250_000.0,
                 lake_area_ratio: None,
+                climate: None,
             },
+            None,
         );
         let outlets = basin_outlets(&d);
         for i in 0..mesh.len() {

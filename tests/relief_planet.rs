@@ -303,11 +303,10 @@ fn the_climate_sets_the_rain_of_the_drainage_and_switched_off_leaves_it_uniform(
     assert_eq!(rain.len(), n, "one value per sample");
     let (mut sum, mut area, mut lo, mut hi) = (0.0, 0.0, f32::INFINITY, 0.0f32);
     let mut below_own_cell = 0;
-    for i in 0..n {
+    for (i, &r) in rain.iter().enumerate() {
         let Some(a) = land_area(&sim, i) else {
             continue;
         };
-        let r = rain[i];
         assert!(r.is_finite() && r >= min_rain, "sample {i}: rain {r}");
         sum += f64::from(r) * a;
         area += a;

@@ -8,7 +8,7 @@
 //! |---|---|---|
 //! | subduction | subduction uplift, slab pull | sets `subduction` + `slab_pull` |
 //! | continental collision | collision detection and surges | set `collision` |
-//! | elevation | erosion, damping, aging of the crust | sets `erosion` + `aging` + the relief (`drainage`, `rivers`, `coasts`, `sediment`, `isostasy`) |
+//! | elevation | erosion, damping, aging of the crust | sets `erosion` + `aging` + the relief (`climate`, `drainage`, `rivers`, `coasts`, `sediment`, `isostasy`) |
 //! | total | per step | every per-step set (the ones above, drift, rifting checks, diagnostics) |
 //! | oceanic crust | crust generation (with the remeshing) | one global resampling + rebuilding the fronts and terranes after it |
 //! | plate rifting | one rift | one rift of the largest plate into two (partition, motions, geometry) |
@@ -89,6 +89,7 @@ fn column(a: &BenchArgs, samples: u64) -> Result<Column> {
     let elevation: f64 = [
         S::Erosion,
         S::Aging,
+        S::Climate,
         S::Drainage,
         S::Rivers,
         S::Coasts,
@@ -190,7 +191,7 @@ pub(crate) fn table2(a: &BenchArgs) -> Result<()> {
         std::array::from_fn(|_| "2-12".to_string()),
     );
     println!(
-        "ours: subduction = subduction + slab_pull; elevation = erosion + aging + drainage + rivers + coasts + sediment + isostasy (the paper had no rivers, sediment or isostasy); total = every per-step set; oceanic crust = one global resampling + the fronts and terranes after it; the paper's whole planet is estimated from its table (a crust generation and a rift every 120 to 20 My)"
+        "ours: subduction = subduction + slab_pull; elevation = erosion + aging + climate + drainage + rivers + coasts + sediment + isostasy (the paper had no climate, rivers, sediment or isostasy); total = every per-step set; oceanic crust = one global resampling + the fronts and terranes after it; the paper's whole planet is estimated from its table (a crust generation and a rift every 120 to 20 My)"
     );
     Ok(())
 }

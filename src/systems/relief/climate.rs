@@ -28,8 +28,10 @@
 //!
 //! The field is then scaled so its area-weighted mean over the land is 1 (the drainage reads it
 //! as relative rain: `rivers.runoff_mm_per_yr` stays the planet's mean runoff), and floored at
-//! `climate.min_rain`. Sea samples get `Z(φ)` over the same scale. Deterministic: one sequential least-cost
-//! search (binary heap keyed by cost, then index), sums in index order.
+//! `climate.min_rain`. Sea samples get `Z(φ)` over the same scale. Paths costing more than
+//! 40·L (moisture e⁻⁴⁰ of the coast's) are not followed: that land gets the least rain.
+//! Deterministic: one sequential least-cost search (a bucket queue, label-correcting), sums over
+//! fixed chunks in order, whatever the thread count.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -184,12 +186,17 @@ pub fn precipitation(
         .extend((0..n as u32).filter(|&i| height[i as usize] > 0.0));
     s.cost.clear();
     s.cost.resize(n, f64::INFINITY);
-    let width = (0.5 * (1.0 - 127.0 * a) * g.mean_spacing_km).max(1e-3);
+    // Buckets half as wide as a mean edge straight downwind costs, and no more than 2¹⁶ of
+    // them up to the cut-off (a wider bucket only means more samples handled twice).
+    let max_cost = 40.0 * l;
+    let width = (0.5 * (1.0 - 127.0 * a) * g.mean_spacing_km)
+        .max(max_cost / 65536.0)
+        .max(1e-3);
     for b in s.buckets.iter_mut() {
         b.clear();
     }
     let per_bucket = 1.0 / width;
-    let bucket = |c: f64| ((c * per_bucket) as usize).min(1 << 24);
+    let bucket = |c: f64| ((c * per_bucket) as usize).min(1 << 17);
     let push = |buckets: &mut Vec<Vec<u32>>, k: usize, i: usize| {
         if k >= buckets.len() {
             buckets.resize_with(k + 1, Vec::new);
@@ -204,9 +211,10 @@ pub fn precipitation(
             if j >= n || g.edge_km[e] <= 0.0 || height[j] > 0.0 {
                 continue;
             }
-            best = best.min(step_cost(e_rev(g, j, i), 0.0, height[i]));
+            // The step from j (its wind) to i, over j's edge to i.
+            best = best.min(step_cost(edge_to(g, j, i).unwrap_or(e), 0.0, height[i]));
         }
-        if best.is_finite() {
+        if best <= max_cost {
             s.cost[i] = best;
             push(&mut s.buckets, bucket(best), i);
         }
@@ -226,7 +234,7 @@ pub fn precipitation(
                     continue;
                 }
                 let cj = c + step_cost(e, hi, height[j]);
-                if cj < s.cost[j] {
+                if cj < s.cost[j] && cj <= max_cost {
                     s.cost[j] = cj;
                     push(&mut s.buckets, bucket(cj), j);
                 }
@@ -294,16 +302,9 @@ pub fn precipitation(
     });
 }
 
-/// The CSR index of the edge `j → i` (the first such; `i`'s own edge index as a fallback
-/// when the graph lacks it, whose length is the same on a symmetric mesh).
-fn e_rev(g: &ReliefGraph, j: usize, i: usize) -> usize {
-    g.edges(j)
-        .find(|&e| g.neighbors[e] as usize == i)
-        .unwrap_or_else(|| {
-            g.edges(i)
-                .find(|&e| g.neighbors[e] as usize == j)
-                .unwrap_or(0)
-        })
+/// The CSR index of the edge `j → i`, if the graph has it.
+fn edge_to(g: &ReliefGraph, j: usize, i: usize) -> Option<usize> {
+    g.edges(j).find(|&e| g.neighbors[e] as usize == i)
 }
 
 #[cfg(test)]
@@ -311,16 +312,7 @@ mod tests {
     use super::*;
     use crate::geometry::SphereMesh;
 
-    fn graph(mesh: &SphereMesh) -> ReliefGraph {
-        ReliefGraph::new(
-            &mesh.positions,
-            &mesh.neighbor_start,
-            &mesh.neighbors,
-            Some(&mesh.triangles),
-            Some(&mesh.area_km2),
-            mesh.radius_km,
-        )
-    }
+    use crate::systems::relief::network::relief_graph as graph;
 
     #[test]
     fn the_zonal_pattern_is_wet_at_the_equator_and_dry_in_the_subtropics() {

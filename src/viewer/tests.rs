@@ -1066,3 +1066,45 @@ fn a_new_or_loaded_planet_stays_on_the_gpu_backend() {
     assert_eq!(on(&h), crate::gpu::ComputeBackend::Gpu, "loaded planet");
     h.finish();
 }
+
+/// The Rain layer shows the climate's rain while the climate is on, and the mean's colour over
+/// all the land once it is switched off in the schedule panel (the drainage then has uniform
+/// rain, and so do the layers drawn from it).
+#[test]
+fn the_rain_layer_follows_the_climate_switch() {
+    let mut h = Harness::new(plain);
+    h.step(2);
+    let snap = h.app.snap.clone().unwrap();
+    assert_eq!(
+        snap.rivers().rain.len(),
+        snap.positions.len(),
+        "climate on: rain"
+    );
+    // Share of the land pixels in the mean's colour.
+    let mean_share = |snap: &super::worker::Snapshot| {
+        let img = map::render_base(snap, BaseLayer::Rain);
+        let lk = &snap.lookup;
+        let [r, g, b] = crate::io::rivers::rain_colour(1.0);
+        let mean = egui::Color32::from_rgb(r, g, b);
+        let land: Vec<usize> = (0..lk.corners.len())
+            .filter(|&i| lk.lerp(&snap.crust.elevation_km, i) > 0.0)
+            .collect();
+        land.iter().filter(|&&i| img.pixels[i] == mean).count() as f64 / land.len() as f64
+    };
+    let on = mean_share(&snap);
+    assert!(on < 0.2, "the climate's rain varies over the land ({on})");
+    h.click("phenomenon:climate");
+    h.settle();
+    h.step(1);
+    let snap = h.app.snap.clone().unwrap();
+    assert!(
+        snap.phenomena
+            .iter()
+            .any(|p| p.name == "climate" && !p.enabled)
+    );
+    assert!(snap.rivers().rain.is_empty(), "climate off: uniform rain");
+    // Land pixels: the mean's colour, but where a river is drawn over it.
+    let off = mean_share(&snap);
+    assert!(off > 0.8, "uniform rain: the mean's colour ({off})");
+    h.finish();
+}

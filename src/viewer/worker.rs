@@ -281,16 +281,22 @@ impl Snapshot {
         self.plates.iter().find(|p| p.id == id)
     }
 
-    /// The drainage network of the crust shown (rivers, lakes, basins), computed the first
-    /// time it is asked for (by whoever draws a layer that needs it).
+    /// The drainage network of the crust shown (rivers, lakes, basins, rain), computed the
+    /// first time it is asked for (by whoever draws a layer that needs it), with the climate's
+    /// rain when the phenomenon `climate` is on in the run, uniform rain otherwise.
     pub fn rivers(&self) -> &RiverNetwork {
         self.rivers.get_or_init(|| {
-            RiverNetwork::on_graph(
-                &self.graph,
-                &self.positions,
-                &self.crust,
-                NetworkOptions::of(&self.params),
-            )
+            let opts = NetworkOptions::of(&self.params);
+            let climate_on = self
+                .phenomena
+                .iter()
+                .any(|p| p.name == crate::plugins::climate::CLIMATE.name() && p.enabled);
+            let opts = if climate_on {
+                opts
+            } else {
+                opts.without_climate()
+            };
+            RiverNetwork::on_graph(&self.graph, &self.positions, &self.crust, opts)
         })
     }
 }

@@ -281,15 +281,12 @@ impl SedimentRouter {
                     continue;
                 }
             }
-            if r == i {
-                // A dry endorheic sink (no lake left): what the basin upstream did not keep
-                // fills it from its floor, not a pile on this one sample.
-                self.pond_fill(g, ocean, i, q, p, elevation_km, &ff, true);
-                b.lakes_km3 += q;
-                continue;
-            }
-            if depth > 0.0 {
-                let cap = depth * g.area_km2[i] / ff(i);
+            if depth > 0.0 || r == i {
+                let cap = if r == i {
+                    f64::INFINITY
+                } else {
+                    depth * g.area_km2[i] / ff(i)
+                };
                 let d = q.min(cap);
                 if d > 0.0 {
                     if self.dep[i] == 0.0 {
@@ -412,7 +409,7 @@ impl SedimentRouter {
             }
             if self.lower.is_empty() {
                 // Local minimum: fill as a pond; the rest spills at the pond's outlet.
-                let (outlet, rest) = self.pond_fill(g, ocean, i, q, p, elevation_km, &ff, false);
+                let (outlet, rest) = self.pond_fill(g, ocean, i, q, p, elevation_km, &ff);
                 b.spread_at_minima_km3 += q - rest;
                 if let Some(o) = outlet {
                     let d = di as f32 + g.mean_spacing_km as f32;
@@ -626,11 +623,6 @@ impl SedimentRouter {
 
     /// Grows a pond from local minimum `i` with `q` km³: returns the outlet (a sample lower than
     /// the pond level next to it) and the volume left for it, or `None` when all was stored.
-    ///
-    /// With `on_land`, the pond grows over land samples from an endorheic sink and keeps all of
-    /// `q`: it fills the basin from its floor, and what would pass its rim (or fill more than
-    /// [`MAX_POND`] samples) is laid on the pond as a blanket, so a basin with no outlet never
-    /// builds a pile on one sample.
     #[allow(clippy::too_many_arguments)]
     fn pond_fill(
         &mut self,
@@ -641,13 +633,8 @@ impl SedimentRouter {
         p: &SedimentParams,
         elevation_km: &[f32],
         ff: &dyn Fn(usize) -> f64,
-        on_land: bool,
     ) -> (Option<usize>, f64) {
-        let ocean_cap = if on_land {
-            f64::INFINITY
-        } else {
-            -p.coast_depth_km
-        };
+        let ocean_cap = -p.coast_depth_km;
         let in_pond = self.fresh_epoch();
         let in_heap = in_pond + 1;
         let cur = |dep: &[f64], j: usize| -> f64 {
@@ -673,7 +660,7 @@ impl SedimentRouter {
             for e in g.edges(newest) {
                 let k = g.neighbors[e] as usize;
                 if k == newest
-                    || ocean[k] == on_land
+                    || !ocean[k]
                     || self.pond_mark[k] == in_pond
                     || self.pond_mark[k] == in_heap
                 {
@@ -716,12 +703,6 @@ impl SedimentRouter {
             self.pond_mark[bnd] = in_pond;
             inv += g.area_km2[bnd] / ff(bnd);
         }
-        if on_land {
-            // An endorheic basin keeps everything: past its rim, a blanket over the pond.
-            level += q / inv;
-            q = 0.0;
-            outlet = None;
-        }
         if outlet.is_none() && q > 0.0 {
             // No outlet within reach (a wide flat plain, or a sea walled in by full shelves):
             // fill the pond up to the shelf surface at the coast and spill the rest over the
@@ -761,22 +742,10 @@ impl SedimentRouter {
                     used * w / wsum
                 };
                 given += v;
-                if on_land {
-                    // A land sample upstream may still hold flux (`touch` would skip it).
-                    if self.dep[j] == 0.0 && v > 0.0 {
-                        self.touched.push(j as u32);
-                    }
-                } else {
-                    self.touch(j);
-                }
+                self.touch(j);
                 self.dep[j] += v;
             }
         } else if used > 0.0 {
-            if on_land && self.dep[i] == 0.0 {
-                self.touched.push(i as u32);
-            } else if !on_land {
-                self.touch(i);
-            }
             self.dep[i] += used;
         }
         self.shares = shares;

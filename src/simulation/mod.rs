@@ -480,17 +480,12 @@ impl Simulation {
     /// in this run: [`NetworkOptions::of`] its parameters, with uniform rain when its
     /// phenomenon `climate` is off.
     pub fn network_options(&self) -> crate::systems::relief::network::NetworkOptions {
-        let opts = crate::systems::relief::network::NetworkOptions::of(self.params());
         let climate_on = self
             .app
             .world()
             .resource::<Phenomena>()
             .is_enabled(crate::plugins::climate::CLIMATE.name());
-        if climate_on {
-            opts
-        } else {
-            opts.without_climate()
-        }
+        crate::systems::relief::network::NetworkOptions::of(self.params()).with_climate(climate_on)
     }
 
     /// The crust as it would be after a resampling now, without changing the simulation: every

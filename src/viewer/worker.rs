@@ -286,16 +286,11 @@ impl Snapshot {
     /// rain when the phenomenon `climate` is on in the run, uniform rain otherwise.
     pub fn rivers(&self) -> &RiverNetwork {
         self.rivers.get_or_init(|| {
-            let opts = NetworkOptions::of(&self.params);
             let climate_on = self
                 .phenomena
                 .iter()
                 .any(|p| p.name == crate::plugins::climate::CLIMATE.name() && p.enabled);
-            let opts = if climate_on {
-                opts
-            } else {
-                opts.without_climate()
-            };
+            let opts = NetworkOptions::of(&self.params).with_climate(climate_on);
             RiverNetwork::on_graph(&self.graph, &self.positions, &self.crust, opts)
         })
     }

@@ -66,7 +66,7 @@ pub struct NetworkOptions {
 
 impl NetworkOptions {
     /// The options the simulation uses with `params`, the climate on (its default; see
-    /// [`Self::without_climate`]).
+    /// [`Self::with_climate`]).
     pub fn of(params: &crate::resources::Params) -> Self {
         Self {
             min_sea_area_km2: params.rivers.min_sea_area_km2,
@@ -75,10 +75,11 @@ impl NetworkOptions {
         }
     }
 
-    /// The same with uniform rain (the phenomenon `climate` switched off).
-    pub fn without_climate(self) -> Self {
+    /// The same with the climate's rain when `climate_on` (the phenomenon `climate` is on in
+    /// the run), uniform rain otherwise.
+    pub fn with_climate(self, climate_on: bool) -> Self {
         Self {
-            climate: None,
+            climate: self.climate.filter(|_| climate_on),
             ..self
         }
     }

@@ -1391,11 +1391,21 @@ fn fifty_steps_on_gpu_match_fifty_steps_on_cpu() {
     let p = common::params(30_000, 17);
     let mut cpu = Simulation::new(p.clone()).expect("sim");
     assert_eq!(cpu.backend(), ComputeBackend::Cpu);
+    // The CPU's own sensitivity: the same run with every elevation nudged by 10 m ± 0.01 m (the
+    // size of the kernels' f32 differences, 1e-5 km), on the CPU.
+    let mut twin = Simulation::new(p.clone()).expect("sim");
+    {
+        let mut crust = twin.world_mut().resource_mut::<Crust>();
+        for (i, z) in crust.elevation_km.iter_mut().enumerate() {
+            *z += if i % 2 == 0 { 1e-5 } else { -1e-5 };
+        }
+    }
     let mut gpu = Simulation::new(p).expect("sim");
     let note = gpu.set_backend(BackendChoice::Gpu).expect("gpu backend");
     eprintln!("{note}");
     assert_eq!(gpu.backend(), ComputeBackend::Gpu);
     cpu.run_steps(50).expect("cpu run");
+    twin.run_steps(50).expect("cpu twin run");
     gpu.run_steps(50).expect("gpu run");
     let traffic = gpu.world().resource::<GpuContext>().traffic;
     let resamplings = gpu.clock().resamplings;
@@ -1423,16 +1433,24 @@ fn fifty_steps_on_gpu_match_fifty_steps_on_cpu() {
         "{traffic:?}, {resamplings} resamplings"
     );
     let (agree, rms_m) = compare(cpu.mesh(), cpu.crust(), gpu.crust());
+    let (twin_agree, twin_rms_m) = compare(cpu.mesh(), cpu.crust(), twin.crust());
     eprintln!(
-        "land masks agree on {:.4}% of the area; RMS {rms_m:.4} m",
-        agree * 100.0
+        "land masks agree on {:.4}% of the area; RMS {rms_m:.4} m (CPU against its nudged twin: {:.4}%, {twin_rms_m:.4} m)",
+        agree * 100.0,
+        twin_agree * 100.0
     );
     // With the relief phenomena the small f32 differences of the kernels (1e-5 km) flip the odd
-    // river's receiver, and incision then differs by hundreds of metres along that river: the
-    // same planet, not the same bits. Measured: 54 m RMS over 50 steps; the paper's relief
-    // (below) stays within 10 m.
+    // river's receiver or a basin's outlet, and incision and fill then differ by hundreds of
+    // metres there: the same planet, not the same bits. How far that goes is the model's own
+    // sensitivity, so the bound is set by the CPU twin nudged at the start by that much; the
+    // GPU differs every step, so it may go a little further. Measured (2026-12-02): 80 m
+    // against a twin's 38 m before endorheic basins filled from their floor, 138 m against
+    // 119 m after; the paper's relief (below) stays within 10 m.
     assert!(agree >= 0.99, "land masks agree on {agree}");
-    assert!(rms_m <= 150.0, "elevation RMS difference {rms_m} m");
+    assert!(
+        rms_m <= (2.5 * twin_rms_m).max(150.0) && rms_m <= 400.0,
+        "elevation RMS difference {rms_m} m (the nudged CPU twin: {twin_rms_m} m)"
+    );
     assert_eq!(cpu.clock().step, gpu.clock().step);
 }
 

@@ -143,6 +143,21 @@ pub struct SedimentRouter {
     pond_epoch: u32,
     pond_heap: BinaryHeap<std::cmp::Reverse<u64>>,
     shares: Vec<(usize, f64)>,
+    /// Position of each land sample in the drainage stack (`u32::MAX` at sea).
+    rank: Vec<u32>,
+    /// The endorheic sink each land sample drains to (`u32::MAX`: the sea).
+    sink_of: Vec<u32>,
+}
+
+/// How a pond grows over land from an endorheic sink (see [`SedimentRouter::pond_fill`]).
+#[derive(Clone, Copy)]
+struct LandPond<'a> {
+    /// The endorheic sink each land sample drains to (`u32::MAX`: the sea): a lower sample
+    /// that drains to the pond's sink joins the pond.
+    sink_of: &'a [u32],
+    /// Whether the pond may overflow at a lower sample that drains elsewhere (else what is
+    /// left is laid on the pond as a blanket).
+    overflow: bool,
 }
 
 #[inline]
@@ -154,6 +169,12 @@ fn order_bits(x: f32) -> u32 {
 /// Most samples one pond may grow to before the rest is laid on it regardless (a thin blanket
 /// over a flat plain; bounds the cost of one pond).
 const MAX_POND: usize = 256;
+/// Most samples a basin with no outlet fills over from its sink before the rest is laid on it
+/// as a blanket (a large closed lake's floor; bounds the cost of one basin).
+const MAX_LAND_POND: usize = 4096;
+/// Full endorheic basins one overflow may pass through (each filled in turn) before the last
+/// keeps the rest.
+const MAX_OVERFLOWS: usize = 8;
 /// Times one ocean sample may be processed in one call before its flux is laid on it.
 const MAX_VISITS: u8 = 8;
 /// Layers thinner than this (km) that stay within this distance of the shelf top are laid
@@ -166,6 +187,19 @@ impl SedimentRouter {
     /// New router; buffers grow on first use.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Lists sample `i` before a deposit lands on it. A land sample upstream may still hold
+    /// flux, which `touch` reads as already listed, so land samples are listed by their deposit.
+    #[inline]
+    fn touch_deposit(&mut self, i: usize, on_land: bool) {
+        if on_land {
+            if self.dep[i] == 0.0 {
+                self.touched.push(i as u32);
+            }
+        } else {
+            self.touch(i);
+        }
     }
 
     #[inline]
@@ -218,6 +252,26 @@ impl SedimentRouter {
         self.pond_mark.resize(n, 0);
         self.touched.clear();
         self.heap.clear();
+        self.rank.clear();
+        self.rank.resize(n, u32::MAX);
+        self.sink_of.clear();
+        self.sink_of.resize(n, u32::MAX);
+        for (k, &j) in drainage.stack.iter().enumerate() {
+            let j = j as usize;
+            if j >= n {
+                continue;
+            }
+            self.rank[j] = k as u32;
+            // Receivers come first in the stack, so theirs is known.
+            let r = drainage.receiver[j] as usize;
+            self.sink_of[j] = if r == j {
+                j as u32
+            } else if r < n && !drainage.ocean[r] {
+                self.sink_of[r]
+            } else {
+                u32::MAX
+            };
+        }
         let ocean = &drainage.ocean;
         let ff = |i: usize| -> f64 {
             fill_factor
@@ -255,39 +309,29 @@ impl SedimentRouter {
             } else {
                 0.0
             };
-            if r == i
-                && let Some(lake) = drainage.closed_lake_samples(i)
-                && !lake.is_empty()
-            {
-                // The sink of a closed lake: what the lake floor upstream did not keep settles
-                // over the whole lake, in proportion to area (the basin fills from its floor).
-                let total: f64 = lake.iter().map(|&j| g.area_km2[j as usize]).sum();
-                if total > 0.0 {
-                    let mut given = 0.0;
-                    for (k, &j) in lake.iter().enumerate() {
-                        let j = j as usize;
-                        let v = if k + 1 == lake.len() {
-                            q - given
-                        } else {
-                            q * g.area_km2[j] / total
-                        };
-                        given += v;
-                        if self.dep[j] == 0.0 && v > 0.0 {
-                            self.touched.push(j as u32);
-                        }
-                        self.dep[j] += v;
-                    }
-                    b.lakes_km3 += q;
-                    continue;
-                }
-            }
-            if depth > 0.0 || r == i {
-                let cap = if r == i {
-                    f64::INFINITY
-                } else {
-                    depth * g.area_km2[i] / ff(i)
+            if r == i {
+                // An endorheic sink (a closed lake's, or a pit whose lake dried up): what the
+                // basin upstream did not keep fills it from its floor, lowest samples first,
+                // never a pile on one sample (which would stand as a hill once the lake is gone).
+                let sink_of = std::mem::take(&mut self.sink_of);
+                let land = LandPond {
+                    sink_of: &sink_of,
+                    overflow: true,
                 };
-                let d = q.min(cap);
+                let (outlet, rest) =
+                    self.pond_fill(g, ocean, i, q, p, elevation_km, &ff, Some(land));
+                self.sink_of = sink_of;
+                b.lakes_km3 += q - rest;
+                if let Some(o) = outlet
+                    && rest > 0.0
+                {
+                    // The basin is full: the rest goes on from its outlet, down the network.
+                    self.overflow(g, drainage, o, k, rest, p, elevation_km, &ff, &mut b);
+                }
+                continue;
+            }
+            if depth > 0.0 {
+                let d = q.min(depth * g.area_km2[i] / ff(i));
                 if d > 0.0 {
                     if self.dep[i] == 0.0 {
                         self.touched.push(i as u32);
@@ -409,7 +453,7 @@ impl SedimentRouter {
             }
             if self.lower.is_empty() {
                 // Local minimum: fill as a pond; the rest spills at the pond's outlet.
-                let (outlet, rest) = self.pond_fill(g, ocean, i, q, p, elevation_km, &ff);
+                let (outlet, rest) = self.pond_fill(g, ocean, i, q, p, elevation_km, &ff, None);
                 b.spread_at_minima_km3 += q - rest;
                 if let Some(o) = outlet {
                     let d = di as f32 + g.mean_spacing_km as f32;
@@ -604,6 +648,71 @@ impl SedimentRouter {
         }
     }
 
+    /// Carries `q` km³ that overflowed a full endorheic basin at land sample `o`, while the
+    /// land pass is at stack position `at`: down `o`'s receivers to the first sample the pass
+    /// has still to route (which takes it on), or to the sea. A sink already routed fills as a
+    /// pond of its own and may overflow in turn, up to [`MAX_OVERFLOWS`] basins; the last keeps
+    /// the rest as a blanket.
+    #[allow(clippy::too_many_arguments)]
+    fn overflow(
+        &mut self,
+        g: &ReliefGraph,
+        drainage: &Drainage,
+        o: usize,
+        at: usize,
+        mut q: f64,
+        p: &SedimentParams,
+        elevation_km: &[f32],
+        ff: &dyn Fn(usize) -> f64,
+        b: &mut SedimentBudget,
+    ) {
+        let ocean = &drainage.ocean;
+        let mut j = o;
+        let mut basins = 0;
+        // Receivers come earlier in the stack, so each walk ends within the stack's length.
+        let mut steps = 0;
+        while steps <= drainage.stack.len() {
+            steps += 1;
+            let r = drainage.receiver[j] as usize;
+            if (self.rank[j] as usize) < at {
+                self.flux[j] += q;
+                return;
+            }
+            if r == j {
+                basins += 1;
+                let sink_of = std::mem::take(&mut self.sink_of);
+                let land = LandPond {
+                    sink_of: &sink_of,
+                    overflow: basins < MAX_OVERFLOWS,
+                };
+                let (outlet, rest) =
+                    self.pond_fill(g, ocean, j, q, p, elevation_km, ff, Some(land));
+                self.sink_of = sink_of;
+                b.lakes_km3 += q - rest;
+                match outlet {
+                    Some(next) if rest > 0.0 => {
+                        q = rest;
+                        j = next;
+                        steps = 0;
+                        continue;
+                    }
+                    _ => return,
+                }
+            }
+            if ocean[r] {
+                b.to_ocean_km3 += q;
+                let d0 = 0.5 * drainage.receiver_km[j];
+                self.send(r, q, d0, elevation_km);
+                return;
+            }
+            j = r;
+        }
+        // Not reached on a valid network; keep the volume where the walk stopped.
+        self.touch_deposit(j, true);
+        self.dep[j] += q;
+        b.lakes_km3 += q;
+    }
+
     /// Adds flux `q` to ocean sample `j` (distance from the coast `d`) and queues it at its
     /// current surface.
     fn send(&mut self, j: usize, q: f64, d: f32, elevation_km: &[f32]) {
@@ -623,6 +732,13 @@ impl SedimentRouter {
 
     /// Grows a pond from local minimum `i` with `q` km³: returns the outlet (a sample lower than
     /// the pond level next to it) and the volume left for it, or `None` when all was stored.
+    ///
+    /// With `land`, the pond grows over land samples from an endorheic sink: it fills the basin
+    /// from its floor (up to [`MAX_LAND_POND`] samples, a large closed lake's floor); a lower
+    /// sample that drains to the same sink joins it, one that drains elsewhere is the outlet
+    /// the full basin overflows at (or, without
+    /// `land.overflow`, the rest is laid on the pond as a blanket, as it is when the pond
+    /// reaches its size limit).
     #[allow(clippy::too_many_arguments)]
     fn pond_fill(
         &mut self,
@@ -633,8 +749,14 @@ impl SedimentRouter {
         p: &SedimentParams,
         elevation_km: &[f32],
         ff: &dyn Fn(usize) -> f64,
+        land: Option<LandPond>,
     ) -> (Option<usize>, f64) {
-        let ocean_cap = -p.coast_depth_km;
+        let on_land = land.is_some();
+        let (ocean_cap, max_pond) = if on_land {
+            (f64::INFINITY, MAX_LAND_POND)
+        } else {
+            (-p.coast_depth_km, MAX_POND)
+        };
         let in_pond = self.fresh_epoch();
         let in_heap = in_pond + 1;
         let cur = |dep: &[f64], j: usize| -> f64 {
@@ -652,7 +774,7 @@ impl SedimentRouter {
         let mut outlet = None;
         let mut barrier: Option<(f64, usize)> = None;
         loop {
-            if self.pond.len() >= MAX_POND {
+            if self.pond.len() >= max_pond {
                 break;
             }
             // Neighbours of the newest pond sample enter the boundary.
@@ -660,7 +782,7 @@ impl SedimentRouter {
             for e in g.edges(newest) {
                 let k = g.neighbors[e] as usize;
                 if k == newest
-                    || !ocean[k]
+                    || ocean[k] == on_land
                     || self.pond_mark[k] == in_pond
                     || self.pond_mark[k] == in_heap
                 {
@@ -677,8 +799,24 @@ impl SedimentRouter {
             let bnd = (key & 0xffff_ffff) as usize;
             let cb = cur(&self.dep, bnd);
             if cb < level - TOL_KM {
-                outlet = Some(bnd);
-                break;
+                let joins = land.is_some_and(|l| l.sink_of.get(bnd) == Some(&(i as u32)));
+                if !joins {
+                    outlet = Some(bnd);
+                    break;
+                }
+                // A lower sample that drains to this sink (eroded below it this step, or a
+                // slope the pond rose past before reaching it) joins the pond: the basin fills
+                // its lowest ground first.
+                q -= (level - cb) * g.area_km2[bnd] / ff(bnd);
+                self.pond.push(bnd as u32);
+                self.pond_mark[bnd] = in_pond;
+                inv += g.area_km2[bnd] / ff(bnd);
+                if q <= 0.0 {
+                    level += q / inv;
+                    q = 0.0;
+                    break;
+                }
+                continue;
             }
             if cb >= ocean_cap {
                 // Already filled to (nearly) sea level: a barrier the pond cannot rise over.
@@ -702,6 +840,14 @@ impl SedimentRouter {
             self.pond.push(bnd as u32);
             self.pond_mark[bnd] = in_pond;
             inv += g.area_km2[bnd] / ff(bnd);
+        }
+        if let Some(l) = land
+            && (outlet.is_none() || !l.overflow)
+        {
+            // No outlet (the size limit): a blanket over the pond.
+            level += q / inv;
+            q = 0.0;
+            outlet = None;
         }
         if outlet.is_none() && q > 0.0 {
             // No outlet within reach (a wide flat plain, or a sea walled in by full shelves):
@@ -742,10 +888,11 @@ impl SedimentRouter {
                     used * w / wsum
                 };
                 given += v;
-                self.touch(j);
+                self.touch_deposit(j, on_land);
                 self.dep[j] += v;
             }
         } else if used > 0.0 {
+            self.touch_deposit(i, on_land);
             self.dep[i] += used;
         }
         self.shares = shares;

@@ -990,6 +990,79 @@ fn closed_lake_shrinks_to_its_water_balance_and_keeps_its_sediment() {
     );
 }
 
+/// A closed crater lake with a hollow on the crater's floor above the lake's level: the hollow
+/// stays dry (the basin's water balance that shrank the lake leaves no water for it), and its
+/// water runs on to the lake. Seen to fail with the hollow left filled to its rim by the flood.
+#[test]
+fn hollows_of_a_closed_basin_beyond_its_lake_stay_dry() {
+    let (mesh, g) = mesh_graph(50_000);
+    let (mut h, ocean) = crater_surface(mesh, g);
+    let hollow = point_from_x(330.0, 30.0);
+    for i in 0..g.len() {
+        let d = angle_between(mesh.positions[i], hollow) * RADIUS_KM;
+        // A small crater: a bowl 0.3 km deep, 150 km in radius, walled by a rim at 200 km.
+        let bowl = if d < 150.0 {
+            0.3 * (1.0 - (d / 150.0).powi(2))
+        } else {
+            0.0
+        };
+        h[i] += (0.5 * (-((d - 200.0) / 90.0).powi(2)).exp() - bowl) as f32;
+    }
+    let bottom = nearest(mesh, hollow);
+    // With water enough, the hollow is a lake (filled to its rim) inside the crater's lake or
+    // beside it.
+    let mut open = Drainage::new();
+    open.lake_area_ratio = None;
+    open.compute(g, &h, &ocean, None);
+    assert!(
+        open.is_lake(bottom),
+        "the hollow holds no water when the balance allows it"
+    );
+    let mut d = Drainage::new();
+    d.lake_area_ratio = Some(0.1);
+    d.compute(g, &h, &ocean, None);
+    // The hollow drains to the sink of the crater's closed lake, near the crater's centre.
+    let mut sink = bottom;
+    for _ in 0..g.len() {
+        let r = d.receiver[sink] as usize;
+        if r == sink {
+            break;
+        }
+        sink = r;
+    }
+    assert!(
+        !ocean[sink] && dist_from_x(mesh.positions[sink]) < 300.0,
+        "the hollow drains to sample {sink}, {} km from the crater's centre",
+        dist_from_x(mesh.positions[sink])
+    );
+    let members = d
+        .closed_lake_samples(sink)
+        .expect("the crater's closed lake");
+    let level = d.water_level_km[sink];
+    assert!(
+        h[bottom] > level,
+        "the hollow's floor {} km lies below the lake's level {level} km",
+        h[bottom]
+    );
+    // No sample of the crater is under water but the closed lakes' own.
+    let in_a_closed_lake = |i: usize| {
+        members.contains(&(i as u32))
+            || d.sinks.iter().any(|&s| {
+                d.closed_lake_samples(s as usize)
+                    .is_some_and(|l| l.contains(&(i as u32)))
+            })
+    };
+    let wet_outside = (0..g.len())
+        .filter(|&i| dist_from_x(mesh.positions[i]) < 700.0 && d.is_lake(i))
+        .filter(|&i| !in_a_closed_lake(i))
+        .count();
+    assert!(
+        wet_outside == 0,
+        "{wet_outside} samples of the crater hold water outside its closed lakes (the hollow: {})",
+        d.is_lake(bottom)
+    );
+}
+
 /// A dry crater (its lake all but evaporated, so its low point is an endorheic sink) fills from
 /// its floor: half of what it holds to its rim leaves a flat floor and no pile on the sink; three
 /// times that fills it to the rim and the rest goes over the rim to the sea. Seen to fail with

@@ -725,6 +725,13 @@ impl Drainage {
                 self.area_km2[r] += self.area_km2[i];
             }
         }
+        // Hollows of the basin beyond its lake hold no water either: the basin's balance that
+        // shrank the lake leaves them dry (their runoff goes on down the flood's receivers,
+        // over their rims, to the lake), where the flood would have filled them to their rims.
+        for &i in &self.order[lake_n.min(self.order.len())..] {
+            let i = i as usize;
+            self.water_level_km[i] = self.h[i];
+        }
         for &i in &self.order {
             self.flood_rank[i as usize] = u32::MAX;
         }

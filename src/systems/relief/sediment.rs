@@ -6,8 +6,10 @@
 //! Land: fluxes Q_i (km³) accumulate in reverse stack order (upstream first), Q_i = e_i·a_i +
 //! Σ Q_donors. A lake sample keeps up to (water level − surface)·a_i / f_i (f_i = surface rise
 //! per unit of deposited thickness, 1 before isostasy, ≈ 0.35 on oceanic crust after it) and
-//! passes the rest on; an endorheic sink keeps everything. Rivers hand their load to the ocean
-//! sample they end in.
+//! passes the rest on. An endorheic sink (a dry pit, or a closed lake's low point) fills its
+//! basin from the floor: a pond grown over land, lowest sample first; when the basin is full to
+//! its rim, the rest overflows there and goes on down the network. Rivers hand their load to the
+//! ocean sample they end in.
 //!
 //! Ocean: a rule-based, single-pass stand-in for marine transport (nonlinear marine diffusion
 //! as in Rivenæs 1992 or goSPL is too slow and too grid-bound at 35–80 km). Ocean samples that

@@ -746,6 +746,52 @@ fn crater_surface(mesh: &SphereMesh, g: &ReliefGraph) -> (Vec<f32>, Vec<bool>) {
     (h, ocean)
 }
 
+/// Where the receiver chain from `i` ends: the sea sample or the sink it drains to. Panics on
+/// a cycle.
+fn chain_end(d: &Drainage, i: usize) -> usize {
+    let mut j = i;
+    for _ in 0..d.receiver.len() {
+        let r = d.receiver[j] as usize;
+        if r == j {
+            return j;
+        }
+        j = r;
+    }
+    panic!("cycle through sample {i}");
+}
+
+/// Erodes `volume` km³ evenly over `samples` and routes it with the default sediment
+/// parameters: the volume that entered, the deposits (km) and the router's budget.
+fn route_evenly(
+    g: &ReliefGraph,
+    d: &Drainage,
+    h: &[f32],
+    samples: &[usize],
+    volume: f64,
+) -> (f64, Vec<f32>, SedimentBudget) {
+    let area: f64 = samples.iter().map(|&i| g.area_km2[i]).sum();
+    let mut eroded = vec![0.0f32; g.len()];
+    for &i in samples {
+        eroded[i] = (volume / area) as f32;
+    }
+    let input = samples
+        .iter()
+        .map(|&i| eroded[i] as f64 * g.area_km2[i])
+        .sum();
+    let mut dep = vec![0.0f32; g.len()];
+    let b = SedimentRouter::new().route(
+        g,
+        d,
+        h,
+        &eroded,
+        None,
+        None,
+        &SedimentParams::default(),
+        &mut dep,
+    );
+    (input, dep, b)
+}
+
 #[test]
 fn closed_basin_fills_and_overflows_as_a_lake() {
     let (mesh, g) = mesh_graph(50_000);
@@ -802,26 +848,7 @@ fn closed_basin_fills_and_overflows_as_a_lake() {
         "catchment samples {}",
         upstream.len()
     );
-    let up_area: f64 = upstream.iter().map(|&i| g.area_km2[i]).sum();
-    let mut eroded = vec![0.0f32; g.len()];
-    for &i in &upstream {
-        eroded[i] = (2.0 * capacity / up_area) as f32;
-    }
-    let input: f64 = upstream
-        .iter()
-        .map(|&i| eroded[i] as f64 * g.area_km2[i])
-        .sum();
-    let mut dep = vec![0.0f32; g.len()];
-    let b = SedimentRouter::new().route(
-        g,
-        &d,
-        &h,
-        &eroded,
-        None,
-        None,
-        &SedimentParams::default(),
-        &mut dep,
-    );
+    let (input, dep, b) = route_evenly(g, &d, &h, &upstream, 2.0 * capacity);
     let in_lake: f64 = lake.iter().map(|&i| dep[i] as f64 * g.area_km2[i]).sum();
     let at_sea: f64 = (0..g.len())
         .filter(|&i| ocean[i])
@@ -890,17 +917,7 @@ fn closed_lake_shrinks_to_its_water_balance_and_keeps_its_sediment() {
     d.compute(g, &h, &ocean, None);
     assert!(d.closed_lake_count() >= 1, "no closed lake");
     // Every land sample ends in the sea or in a sink, without a cycle.
-    let end = |i: usize| -> usize {
-        let mut j = i;
-        for _ in 0..g.len() {
-            let r = d.receiver[j] as usize;
-            if r == j {
-                return j;
-            }
-            j = r;
-        }
-        panic!("cycle through sample {i}");
-    };
+    let end = |i: usize| chain_end(&d, i);
     let sink = end(centre);
     assert!(!ocean[sink], "the crater drains to the sea");
     assert!(d.sinks.contains(&(sink as u32)));
@@ -948,25 +965,7 @@ fn closed_lake_shrinks_to_its_water_balance_and_keeps_its_sediment() {
         .iter()
         .map(|&i| d.lake_depth_km(i as usize) as f64 * g.area_km2[i as usize])
         .sum();
-    let mut eroded = vec![0.0f32; g.len()];
-    for &i in &basin {
-        eroded[i] = (1.2 * capacity / basin_area) as f32;
-    }
-    let input: f64 = basin
-        .iter()
-        .map(|&i| eroded[i] as f64 * g.area_km2[i])
-        .sum();
-    let mut dep = vec![0.0f32; g.len()];
-    let b = SedimentRouter::new().route(
-        g,
-        &d,
-        &h,
-        &eroded,
-        None,
-        None,
-        &SedimentParams::default(),
-        &mut dep,
-    );
+    let (input, dep, b) = route_evenly(g, &d, &h, &basin, 1.2 * capacity);
     // (It stays in the crater: past the lake, the fill may spread over the small closed pits
     // on the crater's slopes that drain to sinks of their own.)
     let kept: f64 = (0..g.len())
@@ -1022,14 +1021,7 @@ fn hollows_of_a_closed_basin_beyond_its_lake_stay_dry() {
     d.lake_area_ratio = Some(0.1);
     d.compute(g, &h, &ocean, None);
     // The hollow drains to the sink of the crater's closed lake, near the crater's centre.
-    let mut sink = bottom;
-    for _ in 0..g.len() {
-        let r = d.receiver[sink] as usize;
-        if r == sink {
-            break;
-        }
-        sink = r;
-    }
+    let sink = chain_end(&d, bottom);
     assert!(
         !ocean[sink] && dist_from_x(mesh.positions[sink]) < 300.0,
         "the hollow drains to sample {sink}, {} km from the crater's centre",
@@ -1086,49 +1078,13 @@ fn dry_endorheic_basin_fills_from_its_floor_and_overflows_when_full() {
     let mut d = Drainage::new();
     d.lake_area_ratio = Some(0.001);
     d.compute(g, &h, &ocean, None);
-    let mut sink = centre;
-    for _ in 0..g.len() {
-        let r = d.receiver[sink] as usize;
-        if r == sink {
-            break;
-        }
-        sink = r;
-    }
+    let sink = chain_end(&d, centre);
     assert!(!ocean[sink] && d.sinks.contains(&(sink as u32)), "no sink");
     let basin: Vec<usize> = (0..g.len())
-        .filter(|&i| {
-            let mut j = i;
-            for _ in 0..g.len() {
-                let r = d.receiver[j] as usize;
-                if r == j {
-                    return j == sink;
-                }
-                j = r;
-            }
-            false
-        })
+        .filter(|&i| !ocean[i] && chain_end(&d, i) == sink)
         .collect();
-    let basin_area: f64 = basin.iter().map(|&i| g.area_km2[i]).sum();
     let run = |volume: f64| {
-        let mut eroded = vec![0.0f32; g.len()];
-        for &i in &basin {
-            eroded[i] = (volume / basin_area) as f32;
-        }
-        let input: f64 = basin
-            .iter()
-            .map(|&i| eroded[i] as f64 * g.area_km2[i])
-            .sum();
-        let mut dep = vec![0.0f32; g.len()];
-        let b = SedimentRouter::new().route(
-            g,
-            &d,
-            &h,
-            &eroded,
-            None,
-            None,
-            &SedimentParams::default(),
-            &mut dep,
-        );
+        let (input, dep, b) = route_evenly(g, &d, &h, &basin, volume);
         assert!(
             b.relative_error() < 1e-6,
             "router error {}",

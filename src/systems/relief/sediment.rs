@@ -736,11 +736,10 @@ impl SedimentRouter {
     /// the pond level next to it) and the volume left for it, or `None` when all was stored.
     ///
     /// With `land`, the pond grows over land samples from an endorheic sink: it fills the basin
-    /// from its floor (up to [`MAX_LAND_POND`] samples, a large closed lake's floor); a lower
-    /// sample that drains to the same sink joins it, one that drains elsewhere is the outlet
-    /// the full basin overflows at (or, without
-    /// `land.overflow`, the rest is laid on the pond as a blanket, as it is when the pond
-    /// reaches its size limit).
+    /// from its floor (up to [`MAX_LAND_POND`] samples, a large closed lake's floor). A lower
+    /// sample that drains to the same sink joins it; one that drains elsewhere is the outlet
+    /// the full basin overflows at. Without `land.overflow`, or at the size limit, the rest is
+    /// laid on the pond as a blanket.
     #[allow(clippy::too_many_arguments)]
     fn pond_fill(
         &mut self,

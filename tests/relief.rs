@@ -746,6 +746,12 @@ fn crater_surface(mesh: &SphereMesh, g: &ReliefGraph) -> (Vec<f32>, Vec<bool>) {
     (h, ocean)
 }
 
+/// Whether sample `i` lies in the crater of [`crater_surface`] or on its rim (within 700 km of
+/// its centre).
+fn in_crater(mesh: &SphereMesh, i: usize) -> bool {
+    dist_from_x(mesh.positions[i]) < 700.0
+}
+
 /// Where the receiver chain from `i` ends: the sea sample or the sink it drains to. Panics on
 /// a cycle.
 fn chain_end(d: &Drainage, i: usize) -> usize {
@@ -887,7 +893,7 @@ fn closed_lake_shrinks_to_its_water_balance_and_keeps_its_sediment() {
     let (mesh, g) = mesh_graph(50_000);
     let (h, ocean) = crater_surface(mesh, g);
     let centre = nearest(mesh, DVec3::X);
-    let in_crater = |i: usize| dist_from_x(mesh.positions[i]) < 700.0;
+    let in_crater = |i: usize| in_crater(mesh, i);
     let lake_area = |d: &Drainage| -> f64 {
         (0..g.len())
             .filter(|&i| in_crater(i) && d.is_lake(i))
@@ -1045,7 +1051,7 @@ fn hollows_of_a_closed_basin_beyond_its_lake_stay_dry() {
             })
     };
     let wet_outside = (0..g.len())
-        .filter(|&i| dist_from_x(mesh.positions[i]) < 700.0 && d.is_lake(i))
+        .filter(|&i| in_crater(mesh, i) && d.is_lake(i))
         .filter(|&i| !in_a_closed_lake(i))
         .count();
     assert!(
@@ -1058,14 +1064,14 @@ fn hollows_of_a_closed_basin_beyond_its_lake_stay_dry() {
 /// A dry crater (its lake all but evaporated, so its low point is an endorheic sink) fills from
 /// its floor: half of what it holds to its rim leaves a flat floor and no pile on the sink; three
 /// times that fills it to the rim and the rest goes over the rim to the sea. Seen to fail with
-/// the sink keeping its basin's sediment on itself (a pile 40 km high; nothing reaches the sea)
-/// and with the full basin laying its excess on the pond instead of passing it on.
+/// the sink keeping its basin's sediment on itself (one filled sample, about 19 km thick) and
+/// with the full basin laying its excess on the pond instead of passing it on.
 #[test]
 fn dry_endorheic_basin_fills_from_its_floor_and_overflows_when_full() {
     let (mesh, g) = mesh_graph(50_000);
     let (h, ocean) = crater_surface(mesh, g);
     let centre = nearest(mesh, DVec3::X);
-    let in_crater = |i: usize| dist_from_x(mesh.positions[i]) < 700.0;
+    let in_crater = |i: usize| in_crater(mesh, i);
     // What the crater holds to its spill point: the lake it would have with water enough.
     let mut open = Drainage::new();
     open.lake_area_ratio = None;

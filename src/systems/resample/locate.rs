@@ -24,16 +24,50 @@ pub fn resample_locate_cpu(
     rules: &OverlapRules,
     sources: &mut Vec<SampleSource>,
 ) {
+    let t = crate::systems::DebugTimer::new("cell plates");
     let cell_plates = CellPlates::build(mesh, old, table);
+    drop(t);
     sources.clear();
     sources.resize(mesh.len(), SampleSource::GAP);
+    // Samples lie along a space-filling curve, so a run of consecutive samples is a small patch:
+    // the plates whose bounding cap reaches the patch are found once for the run, in rank order
+    // (the order `locate_one` compares them in), and each sample tests only those.
+    const RUN: usize = 512;
     sources
-        .par_iter_mut()
+        .par_chunks_mut(RUN)
         .enumerate()
-        .with_min_len(1024)
-        .for_each(|(j, src)| {
-            *src = locate_one(mesh, old, table, &cell_plates, rules, mesh.positions[j]);
+        .for_each(|(r, chunk)| {
+            let q = &mesh.positions[r * RUN..r * RUN + chunk.len()];
+            let slots = plates_near(table, q);
+            for (src, &q) in chunk.iter_mut().zip(q) {
+                *src = locate_among(mesh, old, table, &cell_plates, rules, q, &slots);
+            }
         });
+}
+
+/// The slots of `table`, in rank order, whose bounding cap may hold one of the points `q`
+/// (a superset of the plates passing the cap test of [`locate_one`] at any of them).
+fn plates_near(table: &PlateTable, q: &[DVec3]) -> Vec<u32> {
+    let centre = q.iter().sum::<DVec3>().normalize_or_zero();
+    if centre == DVec3::ZERO {
+        return table.by_rank.clone();
+    }
+    // The patch's angular radius around its centre, with a margin for the rounding.
+    let reach = q
+        .iter()
+        .map(|p| p.dot(centre).clamp(-1.0, 1.0).acos())
+        .fold(0.0f64, f64::max)
+        + 1e-9;
+    table
+        .by_rank
+        .iter()
+        .copied()
+        .filter(|&slot| {
+            let p = &table.plates[slot as usize];
+            let cap = p.cap_cos.clamp(-1.0, 1.0).acos();
+            centre.dot(p.centroid_world).clamp(-1.0, 1.0).acos() <= cap + reach + 1e-9
+        })
+        .collect()
 }
 
 /// A plate covering a point from its core.
@@ -59,9 +93,24 @@ pub fn locate_one(
     rules: &OverlapRules,
     q: DVec3,
 ) -> SampleSource {
+    locate_among(mesh, old, table, cells, rules, q, &table.by_rank)
+}
+
+/// [`locate_one`] over the plates `slots` only (in rank order; every plate whose cap holds `q`
+/// must be among them).
+#[inline]
+fn locate_among(
+    mesh: &SphereMesh,
+    old: &Crust,
+    table: &PlateTable,
+    cells: &CellPlates,
+    rules: &OverlapRules,
+    q: DVec3,
+    slots: &[u32],
+) -> SampleSource {
     let mut best: Option<CoreHit> = None;
     let locator = mesh.locator();
-    for &slot in &table.by_rank {
+    for &slot in slots {
         let p = &table.plates[slot as usize];
         if q.dot(p.centroid_world) < p.cap_cos {
             continue;

@@ -2,6 +2,7 @@
 //! Between resamplings each sample moves with its plate, so vector fields are in the plate frame.
 
 use bevy_ecs::prelude::*;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::random::StableHasher;
@@ -127,15 +128,18 @@ impl Crust {
             ("orogeny_age_my", &self.orogeny_age_my),
         ];
         for (field, v) in scalar {
-            if let Some(index) = v.iter().position(|x| !x.is_finite()) {
+            if let Some(index) = first_non_finite(v) {
                 return Err(NonFinite { field, index });
             }
         }
         let vector: [(&'static str, &Vec<[f32; 3]>); 2] =
             [("ridge_dir", &self.ridge_dir), ("fold_dir", &self.fold_dir)];
         for (field, v) in vector {
-            if let Some(index) = v.iter().position(|x| !x.iter().all(|c| c.is_finite())) {
-                return Err(NonFinite { field, index });
+            if let Some(index) = first_non_finite(v.as_flattened()) {
+                return Err(NonFinite {
+                    field,
+                    index: index / 3,
+                });
             }
         }
         Ok(())
@@ -152,5 +156,52 @@ impl Crust {
             + self.orogeny_age_my.capacity() * 4
             + self.fold_dir.capacity() * 12
             + self.plate.capacity() * 4
+    }
+}
+
+/// The index of the first value of `v` that is not finite. Chunks are scanned in parallel
+/// without an early exit (a scan the compiler vectorises: a value is finite when its exponent
+/// bits are not all ones), and only a chunk holding such a value is searched for it.
+fn first_non_finite(v: &[f32]) -> Option<usize> {
+    const CH: usize = 16384;
+    v.par_chunks(CH)
+        .position_first(|c| {
+            c.iter().fold(false, |bad, x| {
+                bad | (x.to_bits() & 0x7f80_0000 == 0x7f80_0000)
+            })
+        })
+        .map(|k| {
+            let c = &v[k * CH..((k + 1) * CH).min(v.len())];
+            k * CH
+                + c.iter()
+                    .position(|x| !x.is_finite())
+                    .expect("the chunk holds one")
+        })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::first_non_finite;
+
+    #[test]
+    fn first_non_finite_finds_the_first_bad_value_in_any_chunk() {
+        let mut v = vec![1.0f32; 50_000];
+        assert_eq!(first_non_finite(&v), None);
+        for (at, bad) in [
+            (0, f32::NAN),
+            (16_383, f32::INFINITY),
+            (16_384, f32::NEG_INFINITY),
+            (49_999, f32::NAN),
+        ] {
+            v[at] = bad;
+            assert_eq!(first_non_finite(&v), Some(at));
+            // A later bad value does not hide an earlier one.
+            v[49_000] = f32::NAN;
+            assert_eq!(first_non_finite(&v), Some(at.min(49_000)));
+            v[49_000] = 1.0;
+            v[at] = f32::MAX;
+        }
+        assert_eq!(first_non_finite(&v), None);
+        assert_eq!(first_non_finite(&[]), None);
     }
 }

@@ -286,6 +286,40 @@ fn the_ocean_keeps_its_water_volume_and_the_sea_level_follows() {
     );
 }
 
+/// The climate's search runs as a task of the thread pool beside the drainage's routing. Driven
+/// from inside a pool of one thread, the step must run that task itself while it waits for it
+/// (else it waits forever), and the rain and the surface are the same bits as driven from
+/// outside the pool.
+#[test]
+fn the_climate_beside_the_drainage_gives_the_same_bits_from_inside_a_pool_of_one_thread() {
+    use tectonic_planets::systems::relief::Precipitation;
+    let run = || {
+        let mut sim = Simulation::new(small_params(10_000, 2)).unwrap();
+        sim.run_steps(4).unwrap();
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
+        (
+            bits(&sim.world().resource::<Precipitation>().0),
+            bits(&sim.crust().elevation_km),
+        )
+    };
+    let outside = run();
+    // Inside the pool, on a thread of its own, so that waiting forever fails the test.
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let _ = tx.send(pool.install(run));
+    });
+    let inside = rx
+        .recv_timeout(std::time::Duration::from_secs(120))
+        .expect("the step inside a pool of one thread never finished");
+    assert_eq!(outside.0.len(), 10_000, "the climate wrote no rain");
+    assert!(outside.0 == inside.0, "the rain differs inside the pool");
+    assert!(outside.1 == inside.1, "the surface differs inside the pool");
+}
+
 /// The climate writes the rain the drainage weighs its areas with (relative, about 1 on average
 /// over the land, dry and wet places far apart); switched off, the rain is uniform again.
 #[test]

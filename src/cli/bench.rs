@@ -178,6 +178,7 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
         ("pit basins", "drainage_pit_basins"),
         ("priority flood", "drainage_flood"),
         ("stack", "drainage_stack"),
+        ("waiting for the climate", "drainage_climate_wait"),
         ("areas", "drainage_areas"),
         ("lakes' water balance", "drainage_lake_balance"),
     ] {

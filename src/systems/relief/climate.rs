@@ -151,18 +151,40 @@ pub fn precipitation(
     out: &mut Vec<f32>,
     s: &mut ClimateScratch,
 ) {
+    prepare(g, positions, elevation_km, s);
+    precipitation_prepared(g, p, out, s);
+}
+
+/// The first part of [`precipitation`]: what it reads of the mesh and of the surface, copied
+/// into `s`. The rest, [`precipitation_prepared`], needs only the graph and `s`, so it can run
+/// apart from the world (on another thread) while the surface changes.
+pub fn prepare(g: &ReliefGraph, positions: &[DVec3], elevation_km: &[f32], s: &mut ClimateScratch) {
     let n = g.len().min(positions.len());
+    s.height.clear();
+    if n == 0 {
+        return;
+    }
+    s.prepare_mesh(g, positions, n);
+    s.height.extend((0..n).map(|i| match elevation_km.get(i) {
+        Some(&z) if z.is_finite() && z > 0.0 => z,
+        _ => 0.0,
+    }));
+}
+
+/// The second part of [`precipitation`], on the surface and mesh tables [`prepare`] put in
+/// `s`.
+pub fn precipitation_prepared(
+    g: &ReliefGraph,
+    p: &ClimateParams,
+    out: &mut Vec<f32>,
+    s: &mut ClimateScratch,
+) {
+    let n = s.height.len();
     out.clear();
     out.resize(g.len(), 1.0);
     if n == 0 {
         return;
     }
-    s.prepare_mesh(g, positions, n);
-    s.height.clear();
-    s.height.extend((0..n).map(|i| match elevation_km.get(i) {
-        Some(&z) if z.is_finite() && z > 0.0 => z,
-        _ => 0.0,
-    }));
     let l = p.moisture_length_km.max(1e-9);
     let climb_cost = if p.orographic_height_km > 0.0 {
         l / p.orographic_height_km

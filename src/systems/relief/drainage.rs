@@ -267,6 +267,13 @@ impl Drainage {
         ocean: &[bool],
         precipitation: Option<&[f32]>,
     ) {
+        self.compute_routes(g, elevation_km, ocean);
+        self.compute_areas(g, precipitation);
+    }
+
+    /// The first part of [`Self::compute`], which does not read the rain: receivers, pits,
+    /// lakes and the stack (steps 1 to 3). [`Self::compute_areas`] must follow.
+    pub fn compute_routes(&mut self, g: &ReliefGraph, elevation_km: &[f32], ocean: &[bool]) {
         let n = g.len();
         let clock = std::time::Instant::now();
         let mut lap = {
@@ -438,8 +445,17 @@ impl Drainage {
         self.seeds.clear();
         self.timings_ms[2] = lap();
 
-        // 3–4. Donor lists, stack and drainage areas.
-        self.stack_and_areas(g, precipitation, &mut lap);
+        // 3. Donor lists and the stack.
+        self.stack(g);
+        self.timings_ms[3] = lap();
+    }
+
+    /// The second part of [`Self::compute`], after [`Self::compute_routes`]: drainage areas
+    /// weighted by `precipitation` and the lakes' water balance (steps 4 and 5).
+    pub fn compute_areas(&mut self, g: &ReliefGraph, precipitation: Option<&[f32]>) {
+        let clock = std::time::Instant::now();
+        self.areas(g, precipitation);
+        self.timings_ms[4] = clock.elapsed().as_secs_f64() * 1e3;
 
         // 5. Water balance: a lake whose catchment cannot keep it full to its spill point
         //    shrinks to the area its inflow can feed and no longer overflows.
@@ -447,19 +463,15 @@ impl Drainage {
         if let Some(ratio) = self.lake_area_ratio
             && self.lake_sample_count > 0
         {
+            let clock = std::time::Instant::now();
             self.balance_lakes(g, ratio, precipitation);
-            self.timings_ms[5] = lap();
+            self.timings_ms[5] = clock.elapsed().as_secs_f64() * 1e3;
         }
     }
 
-    /// Donor lists (CSR, in sample order), the stack (breadth-first from the outlets) and the
-    /// drainage areas (reverse stack order, sequential f64), from the receivers.
-    fn stack_and_areas(
-        &mut self,
-        g: &ReliefGraph,
-        precipitation: Option<&[f32]>,
-        lap: &mut impl FnMut() -> f64,
-    ) {
+    /// Donor lists (CSR, in sample order) and the stack (breadth-first from the outlets), from
+    /// the receivers.
+    fn stack(&mut self, g: &ReliefGraph) {
         let n = g.len();
         // Donor lists and the stack.
         self.donor_start.clear();
@@ -497,9 +509,10 @@ impl Drainage {
             );
             self.stack.extend_from_slice(&self.donors[a..b]);
         }
-        self.timings_ms[3] = lap();
+    }
 
-        // 4. Drainage areas (reverse stack order, sequential f64).
+    /// Drainage areas (reverse stack order, sequential f64), from the receivers and the stack.
+    fn areas(&mut self, g: &ReliefGraph, precipitation: Option<&[f32]>) {
         self.area_km2.iter_mut().for_each(|a| *a = 0.0);
         for &i in &self.land {
             let i = i as usize;
@@ -512,7 +525,6 @@ impl Drainage {
                 self.area_km2[r] += self.area_km2[i];
             }
         }
-        self.timings_ms[4] = lap();
     }
 
     /// Step 5 of [`Self::compute`]: closes the lakes whose catchment cannot keep them full

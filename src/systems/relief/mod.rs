@@ -51,6 +51,9 @@ pub mod sea_level;
 pub mod sediment;
 pub mod stream_power;
 
+use std::sync::mpsc::{Receiver, TryRecvError};
+use std::sync::{Arc, Mutex};
+
 use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 
@@ -195,8 +198,9 @@ impl SurfaceFlux {
 /// mesh), the regional-isostasy levels, the age–depth table, the trench depth of this step.
 #[derive(Resource, Default)]
 pub struct ReliefState {
-    /// The sample graph of the reference mesh.
-    pub graph: Option<ReliefGraph>,
+    /// The sample graph of the reference mesh (shared with the climate's search while it runs
+    /// beside the drainage).
+    pub graph: Option<Arc<ReliefGraph>>,
     iso: RegionalIsostasy,
     iso_key: Option<(usize, u64)>,
     table: Option<(bool, u64, AgeDepthTable)>,
@@ -227,18 +231,18 @@ impl ReliefState {
 
 /// Builds the sample graph of `mesh` into `slot` unless it is there already (true when it was
 /// rebuilt).
-fn ensure_graph(slot: &mut Option<ReliefGraph>, mesh: &SphereMesh) -> bool {
+fn ensure_graph(slot: &mut Option<Arc<ReliefGraph>>, mesh: &SphereMesh) -> bool {
     if slot.as_ref().is_some_and(|g| g.len() == mesh.len()) {
         return false;
     }
-    *slot = Some(ReliefGraph::new(
+    *slot = Some(Arc::new(ReliefGraph::new(
         &mesh.positions,
         &mesh.neighbor_start,
         &mesh.neighbors,
         Some(&mesh.triangles),
         Some(&mesh.area_km2),
         mesh.radius_km,
-    ));
+    )));
     true
 }
 
@@ -341,10 +345,21 @@ pub struct ClimateState {
     scratch: climate::ClimateScratch,
     /// True while [`Precipitation`] holds the field [`update_climate`] wrote.
     pub wrote: bool,
+    /// The climate's search running beside the drainage: it hands back the field and the
+    /// scratch ([`finish_climate`]).
+    pending: Option<Mutex<Receiver<ClimateResult>>>,
 }
+
+/// What the climate's search hands back: the field and its scratch, or its panic.
+type ClimateResult = std::thread::Result<(Vec<f32>, climate::ClimateScratch)>;
 
 /// Rain over the land from the current surface into [`Precipitation`] (phenomenon `climate`;
 /// see [`climate`]).
+///
+/// The surface is copied here, and the least-cost search, one thread's work, runs as a task of
+/// the thread pool beside the drainage's routing (which does not read the rain):
+/// [`build_drainage`] waits for it before it weighs its areas ([`finish_climate`]). The field
+/// is the same as computed in place.
 pub fn update_climate(
     params: Res<Params>,
     mesh: Res<SphereMesh>,
@@ -354,30 +369,74 @@ pub fn update_climate(
     mut rain: ResMut<Precipitation>,
     mut gpu: Option<ResMut<GpuContext>>,
 ) {
+    finish_climate(&mut cs, &mut rain);
     if !pull(&mut crust, &mut gpu, FieldMask::ELEVATION) {
         return;
     }
     if ensure_graph(&mut state.graph, &mesh) {
         state.iso_key = None;
     }
-    let Some(g) = state.graph.as_ref() else {
+    let Some(g) = state.graph.clone() else {
         return;
     };
     let cs = &mut *cs;
-    climate::precipitation(
-        g,
-        &mesh.positions,
-        &crust.elevation_km,
-        &climate_params(&params),
-        &mut rain.0,
-        &mut cs.scratch,
-    );
+    climate::prepare(&g, &mesh.positions, &crust.elevation_km, &mut cs.scratch);
+    let mut scratch = std::mem::take(&mut cs.scratch);
+    let mut out = std::mem::take(&mut rain.0);
+    let p = climate_params(&params);
+    let (tx, rx) = std::sync::mpsc::sync_channel(1);
+    rayon::spawn(move || {
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || {
+            climate::precipitation_prepared(&g, &p, &mut out, &mut scratch);
+            (out, scratch)
+        }));
+        let _ = tx.send(result);
+    });
+    cs.pending = Some(Mutex::new(rx));
     cs.wrote = true;
+}
+
+/// Waits for the climate [`update_climate`] started, if any, and puts its field into
+/// [`Precipitation`] (a panic in it goes on here). On a thread of the pool (a simulation run
+/// inside `ThreadPool::install`), it runs the pool's pending tasks while it waits, so a pool
+/// of one thread does not wait on itself.
+pub fn finish_climate(cs: &mut ClimateState, rain: &mut Precipitation) {
+    let Some(rx) = cs.pending.take() else {
+        return;
+    };
+    let rx = rx.into_inner().unwrap_or_else(|e| e.into_inner());
+    let result = if rayon::current_thread_index().is_some() {
+        loop {
+            match rx.try_recv() {
+                Ok(r) => break Some(r),
+                Err(TryRecvError::Disconnected) => break None,
+                Err(TryRecvError::Empty) => {
+                    if rayon::yield_now() != Some(rayon::Yield::Executed) {
+                        std::thread::yield_now();
+                    }
+                }
+            }
+        }
+    } else {
+        rx.recv().ok()
+    };
+    match result {
+        Some(Ok((out, scratch))) => {
+            rain.0 = out;
+            cs.scratch = scratch;
+        }
+        Some(Err(panic)) => std::panic::resume_unwind(panic),
+        None => {
+            rain.0.clear();
+            cs.wrote = false;
+        }
+    }
 }
 
 /// With the climate switched off: the rain it wrote goes, so the drainage sees uniform rain
 /// again (a field another plugin set stays).
 pub fn clear_climate(mut cs: ResMut<ClimateState>, mut rain: ResMut<Precipitation>) {
+    finish_climate(&mut cs, &mut rain);
     if cs.wrote {
         rain.0.clear();
         cs.wrote = false;
@@ -393,16 +452,24 @@ pub fn build_drainage(
     mut state: ResMut<ReliefState>,
     mut network: ResMut<DrainageNetwork>,
     mut flux: ResMut<SurfaceFlux>,
-    rain: Option<Res<Precipitation>>,
+    mut rain: Option<ResMut<Precipitation>>,
+    mut climate: Option<ResMut<ClimateState>>,
     mut gpu: Option<ResMut<GpuContext>>,
     mut timings: Option<ResMut<StepTimings>>,
 ) {
+    // The climate's search, if it runs, is done when this system returns.
+    let mut finish = |rain: &mut Option<ResMut<Precipitation>>| {
+        if let (Some(cs), Some(rain)) = (climate.as_deref_mut(), rain.as_deref_mut()) {
+            finish_climate(cs, rain);
+        }
+    };
     // The step's flux starts empty here, for every relief system after this one (they run
     // only with the drainage on, and only on a network built this step).
     let n = mesh.len();
     flux.begin_step(n);
     network.built = false;
     if !pull(&mut crust, &mut gpu, FieldMask::ELEVATION) {
+        finish(&mut rain);
         return;
     }
     let state = &mut *state;
@@ -414,6 +481,7 @@ pub fn build_drainage(
         state.iso_key = None;
     }
     let Some(g) = state.graph.as_ref() else {
+        finish(&mut rain);
         return;
     };
     let mut ocean = std::mem::take(&mut network.drainage.ocean);
@@ -426,15 +494,20 @@ pub fn build_drainage(
         &mut ocean,
         &mut state.sea,
     );
-    let rain = rain.as_ref().map(|r| &r.0[..]).filter(|r| r.len() == n);
     network.drainage.lake_area_ratio = lake_area_ratio(&params);
     let sea_ms = t_sea.elapsed();
     network
         .drainage
-        .compute(g, &crust.elevation_km, &ocean, rain);
+        .compute_routes(g, &crust.elevation_km, &ocean);
+    let t_wait = std::time::Instant::now();
+    finish(&mut rain);
+    let wait = t_wait.elapsed();
+    let rain = rain.as_ref().map(|r| &r.0[..]).filter(|r| r.len() == n);
+    network.drainage.compute_areas(g, rain);
     network.built = true;
     if let Some(t) = timings.as_mut() {
         t.record("drainage_sea_mask", sea_ms);
+        t.record("drainage_climate_wait", wait);
         let ms = network.drainage.timings_ms;
         for (name, k) in [
             ("drainage_receivers", 0),

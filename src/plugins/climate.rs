@@ -4,7 +4,9 @@
 //! [`relief::climate`]), which writes the [`Precipitation`](relief::Precipitation) field the
 //! drainage weighs its areas with; switched off, the rain is uniform again
 //! ([`clear_climate`](relief::clear_climate)). Recomputed every step from the surface, so it
-//! needs no save section.
+//! needs no save section. Its search runs on the thread pool beside the drainage's routing, and
+//! the drainage waits for it before it weighs its areas
+//! ([`finish_climate`](relief::finish_climate)); the field is the same as computed in place.
 
 use bevy_app::{App, Plugin};
 use bevy_ecs::prelude::*;

@@ -52,12 +52,13 @@ fn plates_near(table: &PlateTable, q: &[DVec3]) -> Vec<u32> {
     if centre == DVec3::ZERO {
         return table.by_rank.clone();
     }
-    // The patch's angular radius around its centre, with a margin for the rounding.
+    // The patch's angular radius around its centre, with a margin (6 m) far above the
+    // rounding of these angles (`acos` near 1 loses up to about 1e-8 rad).
     let reach = q
         .iter()
         .map(|p| p.dot(centre).clamp(-1.0, 1.0).acos())
         .fold(0.0f64, f64::max)
-        + 1e-9;
+        + 1e-6;
     table
         .by_rank
         .iter()
@@ -65,7 +66,7 @@ fn plates_near(table: &PlateTable, q: &[DVec3]) -> Vec<u32> {
         .filter(|&slot| {
             let p = &table.plates[slot as usize];
             let cap = p.cap_cos.clamp(-1.0, 1.0).acos();
-            centre.dot(p.centroid_world).clamp(-1.0, 1.0).acos() <= cap + reach + 1e-9
+            centre.dot(p.centroid_world).clamp(-1.0, 1.0).acos() <= cap + reach
         })
         .collect()
 }

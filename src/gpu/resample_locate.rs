@@ -63,29 +63,57 @@ impl CellPlates {
             .collect();
         let loc = mesh.locator();
         let mut cells = vec![[Self::EMPTY; 4]; loc.cell_count()];
-        let many_slots = table.len() >= Self::MANY as usize;
+        if table.len() >= Self::MANY as usize {
+            cells.fill([Self::MANY, Self::EMPTY, Self::EMPTY, Self::EMPTY]);
+            return Self { cells };
+        }
+        // Each triangle's slot when its three vertices share it (most triangles: a cell then
+        // reads one value per triangle instead of three), `MIXED` otherwise. Slots here are
+        // below `MIXED`.
+        const MIXED: u16 = CellPlates::MANY - 1;
+        let tri_slot: Vec<u16> = mesh
+            .triangles
+            .par_iter()
+            .with_min_len(4096)
+            .map(|t| {
+                let s = slot_of_sample[t[0] as usize];
+                if slot_of_sample[t[1] as usize] == s && slot_of_sample[t[2] as usize] == s {
+                    s
+                } else {
+                    MIXED
+                }
+            })
+            .collect();
         cells
             .par_iter_mut()
             .enumerate()
             .with_min_len(1024)
             .for_each(|(c, list)| {
-                if many_slots {
-                    *list = [Self::MANY, Self::EMPTY, Self::EMPTY, Self::EMPTY];
-                    return;
-                }
                 let mut n = 0;
+                // The slots of a cell's triangles' vertices in order, each listed once.
+                let mut add = |list: &mut [u16; 4], s: u16| -> bool {
+                    if s == Self::EMPTY || list[..n].contains(&s) {
+                        return true;
+                    }
+                    if n == 4 {
+                        *list = [Self::MANY, Self::EMPTY, Self::EMPTY, Self::EMPTY];
+                        return false;
+                    }
+                    list[n] = s;
+                    n += 1;
+                    true
+                };
                 for &t in loc.cell_triangles(c) {
-                    for &v in &mesh.triangles[t as usize] {
-                        let s = slot_of_sample[v as usize];
-                        if s == Self::EMPTY || list[..n].contains(&s) {
-                            continue;
-                        }
-                        if n == 4 {
-                            *list = [Self::MANY, Self::EMPTY, Self::EMPTY, Self::EMPTY];
-                            return;
-                        }
-                        list[n] = s;
-                        n += 1;
+                    let ts = tri_slot[t as usize];
+                    let more = if ts != MIXED {
+                        add(list, ts)
+                    } else {
+                        mesh.triangles[t as usize]
+                            .iter()
+                            .all(|&v| add(list, slot_of_sample[v as usize]))
+                    };
+                    if !more {
+                        return;
                     }
                 }
             });

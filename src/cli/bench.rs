@@ -171,6 +171,12 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
     .filter_map(|set| sim.timings().median_ms(set.name()))
     .sum();
     println!("  {:<26} {:>10.3} ms", "relief sets (sum)", relief);
+    if let Some(m) = sim.timings().median_ms("climate_search") {
+        println!(
+            "  {:<26} {m:>10.3} ms  (on its own thread, beside the drainage)",
+            "climate's search"
+        );
+    }
     println!("drainage, by pass (median):");
     for (label, name) in [
         ("sea mask", "drainage_sea_mask"),

@@ -348,10 +348,14 @@ pub struct ClimateState {
     /// The climate's search running beside the drainage: it hands back the field and the
     /// scratch ([`finish_climate`]).
     pending: Option<Mutex<Receiver<ClimateResult>>>,
+    /// How long the last search took on its thread, taken by the drainage's timings (the
+    /// climate set's own time does not hold it: the search runs inside the drainage's).
+    pub last_search: Option<std::time::Duration>,
 }
 
-/// What the climate's search hands back: the field and its scratch, or its panic.
-type ClimateResult = std::thread::Result<(Vec<f32>, climate::ClimateScratch)>;
+/// What the climate's search hands back: the field, its scratch and the time it took, or its
+/// panic.
+type ClimateResult = std::thread::Result<(Vec<f32>, climate::ClimateScratch, std::time::Duration)>;
 
 /// Rain over the land from the current surface into [`Precipitation`] (phenomenon `climate`;
 /// see [`climate`]).
@@ -387,8 +391,9 @@ pub fn update_climate(
     let (tx, rx) = std::sync::mpsc::sync_channel(1);
     rayon::spawn(move || {
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || {
+            let t = std::time::Instant::now();
             climate::precipitation_prepared(&g, &p, &mut out, &mut scratch);
-            (out, scratch)
+            (out, scratch, t.elapsed())
         }));
         let _ = tx.send(result);
     });
@@ -421,9 +426,10 @@ pub fn finish_climate(cs: &mut ClimateState, rain: &mut Precipitation) {
         rx.recv().ok()
     };
     match result {
-        Some(Ok((out, scratch))) => {
+        Some(Ok((out, scratch, took))) => {
             rain.0 = out;
             cs.scratch = scratch;
+            cs.last_search = Some(took);
         }
         Some(Err(panic)) => std::panic::resume_unwind(panic),
         None => {
@@ -502,12 +508,16 @@ pub fn build_drainage(
     let t_wait = std::time::Instant::now();
     finish(&mut rain);
     let wait = t_wait.elapsed();
+    let search = climate.as_deref_mut().and_then(|c| c.last_search.take());
     let rain = rain.as_ref().map(|r| &r.0[..]).filter(|r| r.len() == n);
     network.drainage.compute_areas(g, rain);
     network.built = true;
     if let Some(t) = timings.as_mut() {
         t.record("drainage_sea_mask", sea_ms);
         t.record("drainage_climate_wait", wait);
+        if let Some(search) = search {
+            t.record("climate_search", search);
+        }
         let ms = network.drainage.timings_ms;
         for (name, k) in [
             ("drainage_receivers", 0),

@@ -135,11 +135,8 @@ impl Crust {
         let vector: [(&'static str, &Vec<[f32; 3]>); 2] =
             [("ridge_dir", &self.ridge_dir), ("fold_dir", &self.fold_dir)];
         for (field, v) in vector {
-            if let Some(index) = first_non_finite(v.as_flattened()) {
-                return Err(NonFinite {
-                    field,
-                    index: index / 3,
-                });
+            if let Some(index) = first_non_finite3(v) {
+                return Err(NonFinite { field, index });
             }
         }
         Ok(())
@@ -162,7 +159,7 @@ impl Crust {
 /// The index of the first value of `v` that is not finite. Chunks are scanned in parallel
 /// without an early exit (a scan the compiler vectorises: a value is finite when its exponent
 /// bits are not all ones), and only a chunk holding such a value is searched for it.
-fn first_non_finite(v: &[f32]) -> Option<usize> {
+pub(crate) fn first_non_finite(v: &[f32]) -> Option<usize> {
     const CH: usize = 16384;
     v.par_chunks(CH)
         .position_first(|c| {
@@ -177,6 +174,12 @@ fn first_non_finite(v: &[f32]) -> Option<usize> {
                     .position(|x| !x.is_finite())
                     .expect("the chunk holds one")
         })
+}
+
+/// [`first_non_finite`] over vectors: the index of the first vector with a component that is
+/// not finite.
+pub(crate) fn first_non_finite3(v: &[[f32; 3]]) -> Option<usize> {
+    first_non_finite(v.as_flattened()).map(|k| k / 3)
 }
 
 #[cfg(test)]

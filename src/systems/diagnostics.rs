@@ -122,8 +122,7 @@ pub fn check_finite_with(
     r: &crate::gpu::crust_reduce::CrustReduction,
     newer: FieldMask,
 ) -> Option<NonFinite> {
-    let host = |v: &[f32]| v.iter().position(|x| !x.is_finite());
-    let host3 = |v: &[[f32; 3]]| v.iter().position(|x| !x.iter().all(|c| c.is_finite()));
+    use crate::resources::crust::{first_non_finite as host, first_non_finite3 as host3};
     let pick = |m: FieldMask, k: usize, h: &dyn Fn() -> Option<usize>| {
         if newer.contains(m) {
             r.first_non_finite[k]

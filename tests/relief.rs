@@ -28,7 +28,9 @@ use tectonic_planets::systems::relief::isostasy::{
     ocean_depth_km,
 };
 use tectonic_planets::systems::relief::network::relief_graph;
-use tectonic_planets::systems::relief::sediment::{SedimentBudget, SedimentParams, SedimentRouter};
+use tectonic_planets::systems::relief::sediment::{
+    NO_PASSAGE, SedimentBudget, SedimentParams, SedimentRouter,
+};
 use tectonic_planets::systems::relief::stream_power::{
     StreamPowerParams, StreamPowerScratch, steady_state_slope, stream_power_erode,
 };
@@ -1322,6 +1324,105 @@ fn overfull_sea_spreads_its_excess_and_conserves_mass() {
     assert!(
         top <= cap + 1e-5,
         "an ocean sample stands at {top} km, above {cap} km ({input} km³ into {room} km³ of room)"
+    );
+}
+
+/// A continent (within 700 km of +x) with a shallow sea along its coast (700–850 km, 1 km
+/// deep), whose sea floor beyond, out to 1,300 km, has gone under an overriding plate since the
+/// last resampling (a strip the reference graph still joins to the coast), with open floor
+/// beyond. The land sheds three times what the coastal sea can hold. With passages through the
+/// strip (each sample passing to its neighbour farthest from the continent, as the subducted
+/// floor passes to the one nearest its front), none of the sediment settles on the strip, no sea
+/// sample is raised above the coast's depth, and the rest reaches the open floor; the volume is
+/// kept. The control, the same routing without passages, lays sediment on the strip (which a
+/// resampling would then remove), so the test can fail. Seen to fail: `send` without
+/// `settling_sample` (sediment on the strip); the coastal sea's lower neighbours read without
+/// passages (the open floor got none of it: the coastal sea kept it all).
+#[test]
+fn sediment_passes_over_floor_gone_under_another_plate() {
+    let (mesh, g) = mesh_graph(20_000);
+    let n = g.len();
+    let p = SedimentParams::default();
+    let d: Vec<f64> = mesh.positions.iter().map(|&q| dist_from_x(q)).collect();
+    let ocean: Vec<bool> = d.iter().map(|&x| x >= 700.0).collect();
+    let coastal: Vec<bool> = d.iter().map(|&x| (700.0..850.0).contains(&x)).collect();
+    let under: Vec<bool> = d.iter().map(|&x| (850.0..1300.0).contains(&x)).collect();
+    let h: Vec<f32> = (0..n)
+        .map(|i| match () {
+            _ if !ocean[i] => (0.05 + 0.002 * (700.0 - d[i])) as f32,
+            _ if coastal[i] => -1.0,
+            _ => -5.0,
+        })
+        .collect();
+    let room: f64 = (0..n)
+        .filter(|&i| coastal[i])
+        .map(|i| (1.0 - p.coast_depth_km) * g.area_km2[i])
+        .sum();
+    assert!(room > 0.0, "no coastal sea on the mesh");
+    let mut drainage = Drainage::new();
+    drainage.compute(g, &h, &ocean, None);
+    let land_area: f64 = (0..n).filter(|&i| !ocean[i]).map(|i| g.area_km2[i]).sum();
+    let e = (3.0 * room / land_area) as f32;
+    let eroded: Vec<f32> = (0..n).map(|i| if ocean[i] { 0.0 } else { e }).collect();
+    let input: f64 = (0..n).map(|i| eroded[i] as f64 * g.area_km2[i]).sum();
+    let route = |passages: bool| {
+        let mut router = SedimentRouter::new();
+        if passages {
+            let through = router.passages_mut();
+            through.extend((0..n).map(|i| {
+                if !under[i] {
+                    return NO_PASSAGE;
+                }
+                g.neighbors_of(i)
+                    .iter()
+                    .copied()
+                    .filter(|&j| d[j as usize] > d[i])
+                    .max_by(|&a, &b| d[a as usize].total_cmp(&d[b as usize]))
+                    .unwrap_or(NO_PASSAGE)
+            }));
+        }
+        let mut dep = vec![0.0f32; n];
+        let b = router.route(g, &drainage, &h, &eroded, None, None, &p, &mut dep);
+        let on = |m: &dyn Fn(usize) -> bool| -> f64 {
+            (0..n)
+                .filter(|&i| m(i))
+                .map(|i| dep[i] as f64 * g.area_km2[i])
+                .sum()
+        };
+        let total = on(&|_| true);
+        assert!(
+            (total - input).abs() / input < 1e-6,
+            "deposited {total} of {input} km³"
+        );
+        assert!(b.relative_error() < 1e-6, "router budget {b:?}");
+        let top = (0..n)
+            .filter(|&i| ocean[i] && !under[i])
+            .map(|i| h[i] + dep[i])
+            .fold(f32::MIN, f32::max);
+        (
+            on(&|i| under[i]),
+            on(&|i| ocean[i] && !under[i] && !coastal[i]),
+            top,
+        )
+    };
+    let (control_under, _, _) = route(false);
+    assert!(
+        control_under > 0.5 * (input - room),
+        "without passages the strip got only {control_under} of {input} km³: the control does not test anything"
+    );
+    let (on_strip, beyond, top) = route(true);
+    assert!(
+        on_strip == 0.0,
+        "{on_strip} km³ settled on floor that went under"
+    );
+    assert!(
+        beyond > input - room - 1e-6 * input,
+        "the open floor got {beyond} km³ of {input}, the coastal sea holding at most {room}"
+    );
+    let cap = -p.coast_depth_km as f32;
+    assert!(
+        top <= cap + 1e-5,
+        "a sea sample stands at {top} km, above {cap} km"
     );
 }
 

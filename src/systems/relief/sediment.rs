@@ -39,6 +39,8 @@
 
 use std::collections::BinaryHeap;
 
+use rayon::prelude::*;
+
 use super::drainage::Drainage;
 use super::graph::ReliefGraph;
 
@@ -149,7 +151,18 @@ pub struct SedimentRouter {
     rank: Vec<u32>,
     /// The endorheic sink each land sample drains to (`u32::MAX`: the sea).
     sink_of: Vec<u32>,
+    /// Passages through subducted floor (see [`SedimentRouter::passages_mut`]): per sample, the
+    /// neighbour its sediment passes on to, or [`NO_PASSAGE`] where it may settle.
+    through: Vec<u32>,
+    /// Ocean samples sediment may settle on (the ocean less the subducted floor), per call.
+    settles: Vec<bool>,
 }
+
+/// No passage: the sample is not subducted floor, and sediment may settle on it.
+pub const NO_PASSAGE: u32 = u32::MAX;
+/// Most hops through subducted floor one delivery takes (each hop moves towards the front; a
+/// strip of subducted floor is as wide as the convergence since the last resampling).
+const MAX_PASSAGE_HOPS: usize = 256;
 
 /// How a pond grows over land from an endorheic sink (see [`SedimentRouter::pond_fill`]).
 #[derive(Clone, Copy)]
@@ -202,6 +215,34 @@ impl SedimentRouter {
         } else {
             self.touch(i);
         }
+    }
+
+    /// The per-sample passages through subducted floor that the next [`Self::route`] follows:
+    /// ocean floor that has gone under the overriding plate since the last resampling (still a
+    /// sample of the subducting plate until the next one removes it) takes no sediment, and
+    /// what reaches it passes on, neighbour by neighbour towards its front, to the floor that
+    /// still shows (the trench). Each passage must lead to a sample nearer the front, so a
+    /// chain ends. Fill with [`NO_PASSAGE`] where sediment may settle; leave empty (the
+    /// default) for none. [`Self::route`] drops passages that start or end on land (it changes
+    /// them to [`NO_PASSAGE`]); they are kept between calls.
+    pub fn passages_mut(&mut self) -> &mut Vec<u32> {
+        &mut self.through
+    }
+
+    /// Where sediment sent to ocean sample `j` settles: `j`, or the end of its passage.
+    #[inline]
+    fn settling_sample(&self, mut j: usize) -> usize {
+        if self.through.len() <= j {
+            return j;
+        }
+        for _ in 0..MAX_PASSAGE_HOPS {
+            let t = self.through[j];
+            if t == NO_PASSAGE || t as usize >= self.through.len() {
+                break;
+            }
+            j = t as usize;
+        }
+        j
     }
 
     #[inline]
@@ -275,6 +316,32 @@ impl SedimentRouter {
             };
         }
         let ocean = &drainage.ocean;
+        // Sediment settles on ocean samples outside the passages (see `passages_mut`).
+        let mut settles = std::mem::take(&mut self.settles);
+        settles.clear();
+        if self.through.len() == n {
+            // A passage joins two ocean samples; one that starts or ends on land (crust that
+            // stands above the sea) is no passage, so sediment only ever settles at sea.
+            const CH: usize = 8192;
+            settles.resize(n, false);
+            self.through
+                .par_chunks_mut(CH)
+                .zip(settles.par_chunks_mut(CH))
+                .enumerate()
+                .for_each(|(c, (ts, ss))| {
+                    for (k, (t, s)) in ts.iter_mut().zip(ss.iter_mut()).enumerate() {
+                        let i = c * CH + k;
+                        let j = *t as usize;
+                        if j != NO_PASSAGE as usize && (!ocean[i] || j >= n || !ocean[j]) {
+                            *t = NO_PASSAGE;
+                        }
+                        *s = ocean[i] && *t == NO_PASSAGE;
+                    }
+                });
+        } else {
+            settles.extend_from_slice(&ocean[..n]);
+        }
+        let sea = &settles[..];
         let ff = |i: usize| -> f64 {
             fill_factor
                 .and_then(|f| f.get(i).copied())
@@ -361,6 +428,7 @@ impl SedimentRouter {
                 if !(v.is_finite() && v > 0.0 && ocean[j]) {
                     continue;
                 }
+                let j = self.settling_sample(j);
                 b.input_km3 += v;
                 b.to_ocean_km3 += v;
                 // Fast path: a thin layer that stays under the shelf top is laid down where it
@@ -410,9 +478,15 @@ impl SedimentRouter {
             self.lower.clear();
             let mut repose = f64::INFINITY;
             for e in g.edges(i) {
-                let j = g.neighbors[e] as usize;
                 let d = g.edge_km[e] as f64;
+                let j = g.neighbors[e] as usize;
                 if d <= 0.0 || !ocean[j] {
+                    continue;
+                }
+                // Over subducted floor, the neighbour is where its passage ends (the trench):
+                // the stale edge stands for the margin's edge at the trench.
+                let j = self.settling_sample(j);
+                if j == i || !sea[j] {
                     continue;
                 }
                 let zj = cur(self, j);
@@ -455,7 +529,7 @@ impl SedimentRouter {
             }
             if self.lower.is_empty() {
                 // Local minimum: fill as a pond; the rest spills at the pond's outlet.
-                let (outlet, rest) = self.pond_fill(g, ocean, i, q, p, elevation_km, &ff, None);
+                let (outlet, rest) = self.pond_fill(g, sea, i, q, p, elevation_km, &ff, None);
                 b.spread_at_minima_km3 += q - rest;
                 if let Some(o) = outlet {
                     let d = di as f32 + g.mean_spacing_km as f32;
@@ -491,7 +565,8 @@ impl SedimentRouter {
         // (−coast depth). The visit and pond limits above can leave more than that on one
         // sample (a trench or a basin fed by many rivers); the excess spreads to the nearest
         // ocean samples with room, breadth first, in a fixed order.
-        self.spread_overfull(g, ocean, p, elevation_km, &ff);
+        self.spread_overfull(g, sea, p, elevation_km, &ff);
+        self.settles = settles;
 
         // Write out and reset scratch (a sample listed twice is written once: dep is cleared).
         for k in 0..self.touched.len() {
@@ -715,9 +790,10 @@ impl SedimentRouter {
         b.lakes_km3 += q;
     }
 
-    /// Adds flux `q` to ocean sample `j` (distance from the coast `d`) and queues it at its
-    /// current surface.
+    /// Adds flux `q` to ocean sample `j`, or to the end of its passage (distance from the coast
+    /// `d`), and queues it at its current surface.
     fn send(&mut self, j: usize, q: f64, d: f32, elevation_km: &[f32]) {
+        let j = self.settling_sample(j);
         self.touch(j);
         self.flux[j] += q;
         if d < self.dist[j] {

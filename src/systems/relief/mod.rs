@@ -213,8 +213,9 @@ pub struct ReliefState {
     continental: Vec<bool>,
     fill: Vec<f32>,
     /// Trench depth below the sea floor beside it, km per sample (0 away from fronts), as cut
-    /// by the last isostasy pass. The fronts add it back to read the floor that arrives at
-    /// the trench.
+    /// by the last isostasy pass. The summary reads it to leave trenches out of the normal
+    /// floor's age–depth statistics. The fronts do not: they read the elevation at the front,
+    /// trench and its fill included (docs/relief.md, open problems).
     pub trench_km: Vec<f32>,
     /// Height of the sea above the isostatic datum from the last isostasy pass, km (0 unless
     /// `isostasy.ocean_volume_layer_km` sets the water's volume; see [`sea_level`]).

@@ -477,8 +477,9 @@ impl Simulation {
     }
 
     /// What decides the sea, the lakes and the rain of the drainage network the maps draw, as
-    /// in this run: [`NetworkOptions::of`](crate::systems::relief::network::NetworkOptions::of) its parameters, with uniform rain when its
-    /// phenomenon `climate` is off.
+    /// in this run:
+    /// [`NetworkOptions::of`](crate::systems::relief::network::NetworkOptions::of) its
+    /// parameters, with uniform rain when its phenomenon `climate` is off.
     pub fn network_options(&self) -> crate::systems::relief::network::NetworkOptions {
         let climate_on = self
             .app

@@ -788,58 +788,6 @@ pub fn deposit_sediment(
     after_write(&crust_res, &mut gpu, FieldMask::THICKNESS, declared);
 }
 
-/// Where samples stand against the subduction front points: each point's world position and
-/// normal (from its overriding plate's frame) and the plate table to place samples with.
-struct FrontFrames<'a> {
-    front: Vec<Option<(glam::DVec3, glam::DVec3)>>,
-    table: PlateTable,
-    positions: &'a [glam::DVec3],
-    fp: &'a FrontPoints,
-    radius_km: f64,
-}
-
-impl<'a> FrontFrames<'a> {
-    fn new(mesh: &'a SphereMesh, fp: &'a FrontPoints, table: PlateTable) -> Self {
-        let front = (0..fp.len())
-            .map(|k| {
-                let o = table.get(fp.overriding[k])?;
-                let p = mesh.positions.get(fp.sample[k] as usize)?;
-                Some((o.world_from_plate * *p, o.world_from_plate * fp.normal[k]))
-            })
-            .collect();
-        Self {
-            front,
-            table,
-            positions: &mesh.positions,
-            fp,
-            radius_km: mesh.radius_km,
-        }
-    }
-
-    /// Sample `i` of plate `plate` against front point `k`: how far it stands ahead of the
-    /// front (along the front's normal, km; negative past it) and to its side (km). `None` when
-    /// the plate or the point is unknown.
-    fn offset_km(&self, i: usize, plate: u32, k: usize) -> Option<(f64, f64)> {
-        let (w, nrm) = (*self.front.get(k)?)?;
-        if plate == NO_PLATE {
-            return None;
-        }
-        let off = self.table.get(plate)?.world_from_plate * *self.positions.get(i)? - w;
-        let along = nrm.cross(w);
-        Some((
-            off.dot(nrm) * self.radius_km,
-            off.dot(along) * self.radius_km,
-        ))
-    }
-
-    /// Whether a sideways offset `aside_km` lies beside the stretch of front point `k` stands
-    /// for: half its length, and two spacings of slack, because a sample's front point comes
-    /// from a graph search and can sit more than one spacing to the side.
-    fn beside(&self, aside_km: f64, k: usize, spacing_km: f64) -> bool {
-        aside_km.abs() <= 0.5 * self.fp.length_km[k] as f64 + 2.0 * spacing_km
-    }
-}
-
 /// Sample `i`'s distance to its active subduction front at the last resampling less the
 /// convergence since, km (negative once it went under the overriding plate); `None` for a
 /// sample that is not oceanic crust coming to an active front.
@@ -852,12 +800,13 @@ fn to_front_km(field: &ConvergenceField, fp: &FrontPoints, oceanic: bool, i: usi
 }
 
 /// The passages of [`SedimentRouter::passages_mut`]: a sample of subducting ocean floor more
-/// than the trench's width past its front has gone under the overriding plate since the last resampling, which will remove it. It
-/// passes what reaches it to its neighbour nearest the front, until the floor that still shows
-/// (the trench, or the floor in front of it). Without this, the reference graph, whose edges
-/// still join the overriding margin to the floor it was beside at the last resampling, sends a
-/// margin's sediment onto floor under the margin, and the resampling then discards it: a
-/// quarter of the deposit with collisions in place (a resampling every 10 steps or more).
+/// than the trench's width past its front has gone under the overriding plate since the last
+/// resampling, which will remove it. It passes what reaches it to its neighbour nearest the
+/// front, until the floor that still shows (the trench, or the floor in front of it). Without
+/// this, the reference graph, whose edges still join the overriding margin to the floor it was
+/// beside at the last resampling, sends a margin's sediment onto floor under the margin, and
+/// the resampling then discards it: a sixth of the deposit on the default planet, a quarter
+/// with collisions in place (a resampling every 10 steps or more).
 ///
 /// Unlike the trench, a passage does not ask whether the sample lies beside the stretch of
 /// front its point stands for: oblique convergence carries floor sideways by hundreds of km
@@ -1005,9 +954,19 @@ pub fn apply_isostasy(
     state.trench_km.resize(n, 0.0);
     if field.subducting_point.len() == n && !fp.is_empty() && host.plate.len() >= n {
         let (depth, width) = (ip.trench_depth_km, ip.trench_width_km);
-        let spacing = mesh.mean_spacing_rad() * mesh.radius_km;
-        let frames = FrontFrames::new(&mesh, &fp, PlateTable::from_query(&plates));
+        let r_km = mesh.radius_km;
+        let spacing = mesh.mean_spacing_rad() * r_km;
+        let table = PlateTable::from_query(&plates);
+        // Each front point's world position and normal (from the overriding plate's frame).
+        let front: Vec<Option<(glam::DVec3, glam::DVec3)>> = (0..fp.len())
+            .map(|k| {
+                let o = table.get(fp.overriding[k])?;
+                let p = mesh.positions.get(fp.sample[k] as usize)?;
+                Some((o.world_from_plate * *p, o.world_from_plate * fp.normal[k]))
+            })
+            .collect();
         let behind_km = width + spacing;
+        let positions = &mesh.positions;
         let plate = &host.plate;
         state
             .trench_km
@@ -1025,14 +984,23 @@ pub fn apply_isostasy(
                 if depth_here == 0.0 {
                     return; // beyond the trench: no need to place the sample against its front
                 }
-                // Ahead of the front, and beside the stretch of front the point stands for: a
-                // plate a few samples wide has one front point, and its trench is that
-                // stretch, not an arc around the plate.
-                let faces = match frames.offset_km(i, plate[i], sp as usize) {
-                    Some((ahead, aside)) => {
-                        ahead >= -behind_km && frames.beside(aside, sp as usize, spacing)
-                    }
-                    None => true,
+                let faces = match (front[sp as usize], plate[i]) {
+                    (Some((w, nrm)), pl) if pl != NO_PLATE => match table.get(pl) {
+                        Some(s) => {
+                            let off = s.world_from_plate * positions[i] - w;
+                            // Ahead of the front, and beside the stretch of front the point
+                            // stands for: a plate a few samples wide has one front point, and
+                            // its trench is that stretch, not an arc around the plate. Two
+                            // spacings of slack, because a sample's front point comes from a
+                            // graph search and can sit more than one spacing to the side.
+                            let along = nrm.cross(w);
+                            off.dot(nrm) * r_km >= -behind_km
+                                && off.dot(along).abs() * r_km
+                                    <= 0.5 * fp.length_km[sp as usize] as f64 + 2.0 * spacing
+                        }
+                        None => true,
+                    },
+                    _ => true,
                 };
                 if faces {
                     *t = depth_here as f32;

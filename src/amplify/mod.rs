@@ -5,6 +5,7 @@
 
 pub mod exemplar;
 pub mod procedural;
+pub mod valleys;
 
 use glam::DVec3;
 
@@ -17,6 +18,7 @@ pub use procedural::{
     AmplifyQuery, AmplifyUniform, AmplifyVertex, KIND_ANDEAN, KIND_HIMALAYAN, KIND_OCEAN,
     KIND_PLAIN, MAX_RELIEF_M, amplify_cpu, amplify_point,
 };
+pub use valleys::{PitShare, Valleys, pit_depths, pit_share};
 
 /// Random stream of the primitives' offsets.
 const STREAM_OFFSET: u64 = 900;
@@ -143,6 +145,9 @@ pub struct Amplifier<'a> {
     pub exemplars: Option<ExemplarSet>,
     /// Crust elevation range, metres (min, max).
     pub crust_range_m: (f32, f32),
+    /// River valleys carved into the relief, when a drainage network was given
+    /// ([`Self::with_valleys`]).
+    pub valleys: Option<Valleys>,
 }
 
 impl<'a> Amplifier<'a> {
@@ -171,6 +176,7 @@ impl<'a> Amplifier<'a> {
             },
             exemplars: None,
             crust_range_m,
+            valleys: None,
         }
     }
 
@@ -179,6 +185,13 @@ impl<'a> Amplifier<'a> {
     pub fn with_exemplars(mut self, set: ExemplarSet, seed: u64, options: AmplifyOptions) -> Self {
         set.assign(&mut self.vertices, seed, options.old_orogeny_my);
         self.exemplars = Some(set);
+        self
+    }
+
+    /// Carves the river valleys of `drainage` (the network of the crust this amplifier was
+    /// built from, on the same mesh) into the relief: see [`valleys`].
+    pub fn with_valleys(mut self, drainage: &crate::systems::relief::drainage::Drainage) -> Self {
+        self.valleys = Some(Valleys::new(self.mesh, drainage, &self.vertices));
         self
     }
 
@@ -235,6 +248,29 @@ impl<'a> Amplifier<'a> {
 
     /// Amplified elevation of a query, metres.
     pub fn elevation_of(&self, q: &AmplifyQuery) -> f32 {
+        let z = self.primitives_of(q);
+        self.carve(q, z)
+    }
+
+    /// `z`, the primitives' amplified elevation at query `q` (on the CPU or the GPU), with the
+    /// river valleys carved (unchanged without valleys).
+    pub fn carve(&self, q: &AmplifyQuery, z: f32) -> f32 {
+        match &self.valleys {
+            None => z,
+            Some(v) => v.carve(self.mesh, q, self.base_of(q), z),
+        }
+    }
+
+    /// Crust elevation (barycentric) of a query, metres.
+    fn base_of(&self, q: &AmplifyQuery) -> f32 {
+        let v = &self.vertices;
+        q.w0 * v[q.c0 as usize].elevation_m
+            + q.w1 * v[q.c1 as usize].elevation_m
+            + q.w2 * v[q.c2 as usize].elevation_m
+    }
+
+    /// Amplified elevation of a query from the primitives alone (no valleys), metres.
+    fn primitives_of(&self, q: &AmplifyQuery) -> f32 {
         match &self.exemplars {
             None => amplify_point(&self.uniform, &self.vertices, q),
             Some(set) => {
@@ -249,9 +285,6 @@ impl<'a> Amplifier<'a> {
     /// Crust elevation (no relief) at unit direction `dir`, metres, for before/after pictures.
     pub fn crust_elevation_m(&self, dir: DVec3) -> f32 {
         let q = self.query(dir);
-        let v = &self.vertices;
-        q.w0 * v[q.c0 as usize].elevation_m
-            + q.w1 * v[q.c1 as usize].elevation_m
-            + q.w2 * v[q.c2 as usize].elevation_m
+        self.base_of(&q)
     }
 }

@@ -327,6 +327,23 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
     }
 }
 
+/// The amplitude of vertex `v`'s procedural relief, metres: how far its primitive's noise
+/// reaches above or below the crust (about; the noise's extremes are a little wider). Ocean
+/// floor gives its abyssal hills' amplitude; what [`super::valleys`] incises its beds by.
+pub fn relief_amplitude_m(v: &AmplifyVertex) -> f32 {
+    if v.kind == KIND_OCEAN {
+        OCEAN_HILL_AMP_M
+    } else if v.kind == KIND_PLAIN {
+        PLAIN_AMP_M
+    } else {
+        let him = v.kind == KIND_HIMALAYAN;
+        let amp0 = if him { HIMALAYAN_AMP_M } else { ANDEAN_AMP_M };
+        let height = (v.elevation_m / MOUNTAIN_FULL_HEIGHT_M).clamp(0.1, 1.0);
+        let fresh = (-v.age_my.max(0.0) / OROGENY_OLD_AGE_MY).exp();
+        amp0 * height * (0.35 + 0.65 * fresh)
+    }
+}
+
 /// The isotropic detail layer at unit direction `p`, in about [-1, 1] (two octaves of 3D
 /// gradient noise, 0.8 km and 0.32 km).
 fn detail(u: &AmplifyUniform, p: [f32; 3]) -> f32 {

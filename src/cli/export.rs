@@ -67,6 +67,10 @@ pub(crate) struct ExtraExports {
     /// Multiplies the amplified relief (1 = the model's amplitudes).
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     pub(crate) relief_scale: f32,
+    /// Amplified relief without river valleys (by default the drainage network of the crust
+    /// is carved into it: see docs/amplification.md).
+    #[arg(long)]
+    pub(crate) no_valleys: bool,
     /// Also write a shaded preview PNG of the amplified elevation (and of the crust alone).
     #[arg(long)]
     pub(crate) preview: bool,
@@ -304,6 +308,7 @@ pub(crate) fn write_extra_exports_on(
     let view = sim.resampled_crust();
     let mesh = sim.mesh();
     let mut files = Vec::new();
+    let mut rivers = None;
     if e.geotiff {
         let t = Instant::now();
         files.extend(export::export_crust_layers(
@@ -311,7 +316,7 @@ pub(crate) fn write_extra_exports_on(
         )?);
         say(&format!("crust GeoTIFFs {}x{}", grid.width, grid.height), t);
         let t = Instant::now();
-        let rivers = RiverNetwork::of(mesh, &view, network_opts);
+        let rivers = rivers.insert(RiverNetwork::of(mesh, &view, network_opts));
         files.extend(export::export_drainage_layers(
             mesh, &rivers, &grid, out, prefix,
         )?);
@@ -331,6 +336,10 @@ pub(crate) fn write_extra_exports_on(
     let mut amp = Amplifier::new(mesh, &view, seed, options);
     if let Some(set) = exemplars {
         amp = amp.with_exemplars(set, seed, options);
+    }
+    if !e.no_valleys && e.relief_scale != 0.0 {
+        let rivers = rivers.get_or_insert_with(|| RiverNetwork::of(mesh, &view, network_opts));
+        amp = amp.with_valleys(&rivers.drainage);
     }
     say("amplification tables", t);
     if e.amplified {

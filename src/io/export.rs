@@ -463,6 +463,14 @@ pub fn export_amplified_on(
                 band.clear();
                 band.resize(queries.len(), f32::NAN);
                 kernel.run(ctx, &queries, &mut band)?;
+                if amp.valleys.is_some() {
+                    // The valleys are carved on the CPU, after the kernel.
+                    use rayon::prelude::*;
+                    band.par_iter_mut()
+                        .zip(queries.par_iter())
+                        .with_min_len(1024)
+                        .for_each(|(z, q)| *z = amp.carve(q, *z));
+                }
             }
             None => grid.band_hinted(row0, rows, &f, &mut band),
         }

@@ -1,0 +1,582 @@
+//! River valleys in the amplified relief (issue 19, item 2): the simulation's drainage network
+//! carved into the detailed elevation, so that valley floors fall to the sea, and a measure of
+//! the closed pits a heightmap has ([`pit_share`]).
+//!
+//! **The network.** Every land sample of the resampled crust drains to one neighbour (its
+//! receiver, [`crate::systems::relief::drainage::Drainage`]). Each such edge is a reach of river:
+//! a straight segment (a chord of the sphere) from the sample to its receiver, with the
+//! sample's drainage area.
+//!
+//! **The bed.** Each land sample gets a bed elevation: its water level (the coarse elevation, or
+//! a lake's surface) less an incision as deep as the relief primitives around it are high
+//! (so that the noise of the primitives never reaches below the floor of a valley), raised where
+//! needed so that no bed lies below its receiver's (walked from the outlets upstream): beds fall
+//! monotonically to the sea, or to the floor of a closed basin. An ocean receiver's bed is sea
+//! level. Along a reach the bed is linear between its two ends.
+//!
+//! **The valley.** At a point, each reach near it offers a surface: its bed at the point's
+//! projection on the reach, plus a wall rising at a slope set by the relief around the reach
+//! (steep in young ranges, gentle on plains) beyond a flat floor whose half-width grows with
+//! the square root of the drainage area. The detailed elevation is the lowest of the reaches'
+//! surfaces and the primitives' relief, whose noise fades out towards the floor. A function
+//! without local minima stays without them under such a minimum, so the floors drain: the
+//! closed pits left are those of the primitives' noise between valleys, and lakes.
+//!
+//! **Locality.** A point reads the reaches of the samples around its triangle (its corners and
+//! their neighbours), so a valley's half-width is capped at a third of the mesh spacing; the
+//! value at a point depends only on the point and the network, never on the tiling, the output
+//! size or the thread count.
+
+use glam::DVec3;
+
+use crate::geometry::SphereMesh;
+use crate::random::{hash3, unit_f64};
+use crate::systems::relief::drainage::Drainage;
+
+use super::procedural::{AmplifyQuery, AmplifyVertex, relief_amplitude_m};
+
+/// No bed (ocean samples, samples without a reach).
+const NO_BED: f32 = f32::NAN;
+/// Half-width of the flat floor per square root of drainage area, km per √km².
+const FLOOR_KM_PER_SQRT_KM2: f64 = 0.008;
+/// Widest floor (half-width), km.
+const MAX_FLOOR_KM: f64 = 4.0;
+/// Incision of the bed below the coarse water level, as a share of the primitives' amplitude,
+/// and its least value, metres.
+const INCISION_SHARE: f64 = 0.6;
+const MIN_INCISION_M: f64 = 10.0;
+/// How much the primitives' relief steepens or flattens the valleys' walls: the walls' slope
+/// is multiplied by 1 + this × (relief / amplitude), within [`MOD_RANGE`].
+const MOD_GAIN: f64 = 0.6;
+const MOD_RANGE: (f64, f64) = (0.6, 1.6);
+/// The primitives' elevation caps the valleys' surfaces this many amplitudes above itself.
+const CAP_AMPS: f64 = 0.5;
+/// A main valley's walls climb to the crust plus this many amplitudes at the end of their run.
+const WALL_RISE_AMPS: f64 = 0.8;
+/// ... over this share of the distance at which they start to be lifted out of the way (so
+/// they meet the cap well before: no trace of the lift shows).
+const WALL_RUN_SHARE: f64 = 0.75;
+/// Crust elevation over which the cap grows from nothing to its full height, metres.
+const CAP_RAMP_M: f64 = 100.0;
+/// Reach of a river's valley from its course, in mesh spacings (see the module documentation:
+/// at most what the corners' neighbours cover).
+const REACH_SPACINGS: f64 = 0.6;
+/// Share of the reach over which a valley's surface is lifted out of the way, so that it ends
+/// without a step.
+const REACH_FADE_SHARE: f64 = 0.3;
+/// Gentlest and steepest wall of a main valley, m/m.
+const MIN_WALL_SLOPE: f64 = 0.01;
+const MAX_WALL_SLOPE: f64 = 0.8;
+
+/// The river valleys of a crust's drainage network, ready to carve amplified relief.
+#[derive(Clone, Debug)]
+pub struct Valleys {
+    /// Receiver of each sample with a reach (`u32::MAX`: none).
+    receiver: Vec<u32>,
+    /// Bed elevation of each land sample, metres (NaN: none).
+    bed_m: Vec<f32>,
+    /// Floor half-width of each sample's reach, km.
+    floor_km: Vec<f32>,
+    /// Wall slope of each sample's reach, m/m.
+    slope: Vec<f32>,
+    /// Amplitude of each sample's relief primitive, metres.
+    amp_m: Vec<f32>,
+    /// Largest distance from a reach at which it can carve, km.
+    reach_km: f64,
+    /// The reaches that can carve each cell of a cubic grid over the unit sphere (cells
+    /// `cell` wide): sorted cell keys, and the reaches (their upstream samples) of each, CSR.
+    cell: f64,
+    keys: Vec<u64>,
+    starts: Vec<u32>,
+    reaches: Vec<u32>,
+    /// Planet radius, km.
+    radius_km: f64,
+}
+
+impl Valleys {
+    /// The valleys of `drainage` (a network of the crust whose amplification `vertices` are),
+    /// on `mesh`.
+    pub fn new(mesh: &SphereMesh, drainage: &Drainage, vertices: &[AmplifyVertex]) -> Self {
+        let n = mesh.len();
+        let spacing_km = mesh.mean_spacing_rad() * mesh.radius_km;
+        let max_floor = MAX_FLOOR_KM.min(0.15 * spacing_km);
+        let mut receiver = vec![u32::MAX; n];
+        let mut bed_m = vec![NO_BED; n];
+        let mut floor_km = vec![0.0f32; n];
+        let mut slope = vec![0.0f32; n];
+        let amp_m: Vec<f32> = vertices.iter().map(relief_amplitude_m).collect();
+        let ok = drainage.receiver.len() == n && vertices.len() == n;
+        if ok {
+            // Beds, from the outlets upstream (the stack lists every land sample after its
+            // receiver).
+            for &i in &drainage.stack {
+                let i = i as usize;
+                let r = drainage.receiver[i] as usize;
+                let amp = f64::from(relief_amplitude_m(&vertices[i]));
+                let level = 1000.0 * f64::from(drainage.water_level_km[i]);
+                let raw = level - (INCISION_SHARE * amp).max(MIN_INCISION_M);
+                let below = if r == i {
+                    f64::NEG_INFINITY
+                } else if drainage.ocean[r] {
+                    0.0
+                } else {
+                    f64::from(bed_m[r])
+                };
+                let bed = if below.is_nan() { raw } else { raw.max(below) };
+                bed_m[i] = bed as f32;
+                if r != i {
+                    receiver[i] = r as u32;
+                }
+                let area = drainage.area_km2[i].max(0.0);
+                floor_km[i] = (FLOOR_KM_PER_SQRT_KM2 * area.sqrt()).min(max_floor) as f32;
+                // The main valley's walls climb from the bed to the primitives' crests over the
+                // reach: tributaries cut into them, the primitives' noise caps the divides.
+                let rise_m = level - bed + WALL_RISE_AMPS * amp;
+                let run_km =
+                    WALL_RUN_SHARE * REACH_SPACINGS * (1.0 - REACH_FADE_SHARE) * spacing_km;
+                slope[i] =
+                    (rise_m / (1000.0 * run_km)).clamp(MIN_WALL_SLOPE, MAX_WALL_SLOPE) as f32;
+            }
+        }
+        let reach_km = REACH_SPACINGS * spacing_km;
+        let cell = 2.0 * reach_km / mesh.radius_km;
+        let (keys, starts, reaches) = reach_grid(mesh, &receiver, cell, reach_km / mesh.radius_km);
+        Self {
+            cell,
+            keys,
+            starts,
+            reaches,
+            receiver,
+            bed_m,
+            floor_km,
+            slope,
+            amp_m,
+            reach_km,
+            radius_km: mesh.radius_km,
+        }
+    }
+
+    /// The carved elevation at query `q`, metres: `amplified` (the primitives' value there)
+    /// with the valleys of the reaches near it; `base` is the crust elevation there (the
+    /// barycentric one).
+    pub fn carve(&self, mesh: &SphereMesh, q: &AmplifyQuery, base: f32, amplified: f32) -> f32 {
+        let corners = [q.c0 as usize, q.c1 as usize, q.c2 as usize];
+        let p = DVec3::new(f64::from(q.dx), f64::from(q.dy), f64::from(q.dz));
+        let amp_here = f64::from(
+            q.w0 * self.amp_m[corners[0]]
+                + q.w1 * self.amp_m[corners[1]]
+                + q.w2 * self.amp_m[corners[2]],
+        )
+        .max(30.0);
+        // On land the valleys' walls are capped by the crust raised a little, with the
+        // primitives' crests (their relief above the crust) on top: the divides keep their
+        // peaks, and their cols drain (the crust is flat or tilted within a triangle, so the cap
+        // has no pit of its own). At sea the cap is the primitives' elevation. Continuous: the
+        // land's cap takes over within the first CAP_RAMP_M of crust elevation.
+        let land = (f64::from(base) / CAP_RAMP_M).clamp(0.0, 1.0);
+        let relief = f64::from(amplified - base);
+        let land_cap = f64::from(base) + CAP_AMPS * amp_here + relief.max(0.0);
+        let cap = f64::from(amplified) + (land_cap - f64::from(amplified)) * land;
+        let candidates = match self.keys.binary_search(&cell_key(p, self.cell)) {
+            Ok(c) => &self.reaches[self.starts[c] as usize..self.starts[c + 1] as usize],
+            Err(_) => return cap as f32, // no reach comes this close
+        };
+        let mut surface = f64::INFINITY;
+        let m = (1.0 + MOD_GAIN * f64::from(amplified - base) / amp_here)
+            .clamp(MOD_RANGE.0, MOD_RANGE.1);
+        let mut visit = |i: usize| {
+            let r = self.receiver[i];
+            if r == u32::MAX {
+                return;
+            }
+            let r = r as usize;
+            let (a, b) = (mesh.positions[i], mesh.positions[r]);
+            // The reach's plane: x downstream, y to its left, km (chords: a reach is a few tens
+            // of km on a planet of thousands).
+            let ab = b - a;
+            let len = ab.length() * self.radius_km;
+            if len <= 0.0 {
+                return;
+            }
+            let u = ab.normalize();
+            let nrm = a.cross(u).normalize_or_zero();
+            let rel = (p - a) * self.radius_km;
+            let (x, y) = (rel.dot(u), rel.dot(nrm));
+            // Distance to the reach's course; beyond the reach it offers nothing, and over its
+            // outer part its surface is lifted out of the way (continuous, so no seam where a
+            // point stops seeing this reach).
+            let xc = x.clamp(0.0, len);
+            let d_main = ((x - xc) * (x - xc) + y * y).sqrt();
+            if d_main >= self.reach_km {
+                return;
+            }
+            let lift_from = (1.0 - REACH_FADE_SHARE) * self.reach_km;
+            let t = ((d_main - lift_from) / (self.reach_km - lift_from)).clamp(0.0, 1.0);
+            let bed_a = f64::from(self.bed_m[i]);
+            let bed_b = match self.bed_m[r] {
+                b if b.is_nan() => bed_a.min(0.0),
+                b => f64::from(b),
+            };
+            let reach = Reach {
+                slope_m_per_km: 1000.0 * f64::from(self.slope[i]),
+                floor_km: f64::from(self.floor_km[i]),
+                key: i as u64,
+            };
+            let seg = Seg {
+                a: (0.0, 0.0),
+                b: (len, 0.0),
+                bed_a,
+                bed_b,
+            };
+            let s = reach.surface(&seg, (x, y), 0, reach.slope_m_per_km, m);
+            // Over the outer part of the reach, blended up to the cap: at the reach's edge it is
+            // nowhere below the cap, so leaving it out there changes nothing.
+            surface = surface.min(s + t * t * (cap - s).max(0.0));
+        };
+        for &i in candidates {
+            visit(i as usize);
+        }
+        surface.min(cap) as f32
+    }
+}
+
+/// The key of the grid cell (`cell` wide, unit-sphere units) holding `p`.
+fn cell_key(p: DVec3, cell: f64) -> u64 {
+    const OFF: i64 = 1 << 20;
+    let c = |v: f64| ((v / cell).floor() as i64 + OFF) as u64 & 0x1f_ffff;
+    c(p.x) << 42 | c(p.y) << 21 | c(p.z)
+}
+
+/// The reach grid of [`Valleys`]: every reach (sample → receiver) listed in each cell whose
+/// centre lies within its reach (`reach` plus half a cell's diagonal, unit-sphere units) of the
+/// reach's course, so that a point sees, in its own cell, every reach within `reach` of it.
+fn reach_grid(
+    mesh: &SphereMesh,
+    receiver: &[u32],
+    cell: f64,
+    reach: f64,
+) -> (Vec<u64>, Vec<u32>, Vec<u32>) {
+    use rayon::prelude::*;
+    let half_diag = 0.5 * cell * 3f64.sqrt();
+    let mut pairs: Vec<(u64, u32)> = (0..receiver.len())
+        .into_par_iter()
+        .with_min_len(4096)
+        .flat_map_iter(|i| {
+            let r = receiver[i];
+            let mut out = Vec::new();
+            if r == u32::MAX {
+                return out.into_iter();
+            }
+            let (a, b) = (mesh.positions[i], mesh.positions[r as usize]);
+            let lo = a.min(b) - DVec3::splat(reach);
+            let hi = a.max(b) + DVec3::splat(reach);
+            let idx = |v: f64| (v / cell).floor() as i64;
+            let ab = b - a;
+            for x in idx(lo.x)..=idx(hi.x) {
+                for y in idx(lo.y)..=idx(hi.y) {
+                    for z in idx(lo.z)..=idx(hi.z) {
+                        let c = DVec3::new(x as f64 + 0.5, y as f64 + 0.5, z as f64 + 0.5) * cell;
+                        let t = ((c - a).dot(ab) / ab.length_squared().max(1e-30)).clamp(0.0, 1.0);
+                        if (c - (a + ab * t)).length() <= reach + half_diag {
+                            out.push((cell_key(c, cell), i as u32));
+                        }
+                    }
+                }
+            }
+            out.into_iter()
+        })
+        .collect();
+    pairs.par_sort_unstable();
+    let mut keys = Vec::new();
+    let mut starts = Vec::new();
+    let mut reaches = Vec::with_capacity(pairs.len());
+    for (k, r) in pairs {
+        if keys.last() != Some(&k) {
+            keys.push(k);
+            starts.push(reaches.len() as u32);
+        }
+        reaches.push(r);
+    }
+    starts.push(reaches.len() as u32);
+    (keys, starts, reaches)
+}
+
+/// A valley segment in a reach's plane (km): from `a` (upstream) to `b` (downstream), its bed
+/// linear from `bed_a` to `bed_b` (metres, `bed_a ≥ bed_b`).
+#[derive(Clone, Copy, Debug)]
+struct Seg {
+    a: (f64, f64),
+    b: (f64, f64),
+    bed_a: f64,
+    bed_b: f64,
+}
+
+/// Distance from `p` to segment `s`, km.
+fn seg_distance(s: &Seg, p: (f64, f64)) -> f64 {
+    let (dx, dy) = (s.b.0 - s.a.0, s.b.1 - s.a.1);
+    let (rx, ry) = (p.0 - s.a.0, p.1 - s.a.1);
+    let t = ((rx * dx + ry * dy) / (dx * dx + dy * dy).max(1e-30)).clamp(0.0, 1.0);
+    ((rx - dx * t).powi(2) + (ry - dy * t).powi(2)).sqrt()
+}
+
+/// What a reach's valleys share: the main valley's wall slope and floor, the random key.
+struct Reach {
+    slope_m_per_km: f64,
+    floor_km: f64,
+    key: u64,
+}
+
+/// Tributary levels below a reach.
+const LEVELS: usize = 2;
+/// Spacing of tributary junctions along their parent, km, per level.
+const TRIB_SPACING_KM: [f64; LEVELS] = [5.0, 1.5];
+/// Longest tributary, km, per level.
+const TRIB_LENGTH_KM: [f64; LEVELS] = [14.0, 3.0];
+/// Distance from a tributary's course within which it carves, km, per level (it is lifted out
+/// of the way over half as much again).
+const TRIB_INFLUENCE_KM: [f64; LEVELS] = [4.0, 1.5];
+/// Rise of a tributary's bed across its parent's wall, as a share of the wall's rise.
+const TRIB_BED_SHARE: f64 = 0.3;
+/// A tributary's walls are this much steeper than its parent's.
+const TRIB_STEEPER: f64 = 1.3;
+/// Steepest tributary wall, m/km.
+const MAX_TRIB_SLOPE_M_PER_KM: f64 = 800.0;
+/// Half-width of a tributary's floor, km.
+const TRIB_FLOOR_KM: f64 = 0.08;
+
+impl Reach {
+    /// The lowest valley surface of `seg` and its tributaries (to depth [`LEVELS`]) at `p`,
+    /// metres; `slope` is `seg`'s wall slope (m/km), `m` the point's wall factor.
+    fn surface(&self, seg: &Seg, p: (f64, f64), level: usize, slope: f64, m: f64) -> f64 {
+        let (dx, dy) = (seg.b.0 - seg.a.0, seg.b.1 - seg.a.1);
+        let len = (dx * dx + dy * dy).sqrt();
+        if len <= 1e-9 {
+            return f64::INFINITY;
+        }
+        let (ux, uy) = (dx / len, dy / len);
+        let (rx, ry) = (p.0 - seg.a.0, p.1 - seg.a.1);
+        let along = rx * ux + ry * uy;
+        let t = (along / len).clamp(0.0, 1.0);
+        let (cx, cy) = (rx - dx * t, ry - dy * t);
+        let d = (cx * cx + cy * cy).sqrt();
+        let floor = if level == 0 {
+            self.floor_km
+        } else {
+            TRIB_FLOOR_KM
+        };
+        let out = (d - floor).max(0.0);
+        let own = seg.bed_a + (seg.bed_b - seg.bed_a) * t + slope * m * out;
+        let mut best = own;
+        if level >= LEVELS {
+            return best;
+        }
+        let (spacing, max_len) = (TRIB_SPACING_KM[level], TRIB_LENGTH_KM[level]);
+        let max_len = max_len.min(0.6 * len.max(spacing));
+        // A tributary carves within `rho` of its course and is lifted out of the way over the
+        // next `fade` (so that it ends without a step); every tributary lies within `max_len` of
+        // its parent.
+        let rho = TRIB_INFLUENCE_KM[level];
+        let fade = 0.5 * rho;
+        if d > max_len + rho + fade {
+            return best;
+        }
+        // A tributary runs upstream from its junction at 45–80° to its parent: it can come
+        // within `rho + fade` of p only if its junction lies within that of p's position along
+        // the parent, or at most its run (`max_len`·cos 45°) downstream of it; and one on the
+        // other side of the parent only if p is that close to the parent.
+        let reach = rho + fade;
+        let k0 = (((along - reach) / spacing).floor() as i64 - 1).max(0);
+        let k1 = (((along + reach + std::f64::consts::FRAC_1_SQRT_2 * max_len) / spacing).ceil()
+            as i64)
+            .min((len / spacing) as i64);
+        let across = (p.1 - seg.a.1) * ux - (p.0 - seg.a.0) * uy;
+        let sides: &[f64] = match (across >= 0.0, across.abs() < reach) {
+            (_, true) => &[-1.0, 1.0],
+            (true, false) => &[1.0],
+            (false, false) => &[-1.0],
+        };
+        for (side, k) in sides
+            .iter()
+            .flat_map(|&side| (k0..=k1).map(move |k| (side, k)))
+        {
+            let kk = k as u64;
+            let h = |n: u64| {
+                unit_f64(hash3(
+                    self.key,
+                    0x7661_6c6c + level as u64,
+                    kk << 8 | n << 1 | u64::from(side > 0.0),
+                ))
+            };
+            let xk = (kk as f64 + 0.5 + 0.6 * (h(0) - 0.5)) * spacing;
+            if !(0.0..=len).contains(&xk) {
+                continue;
+            }
+            // The angle to the parent, 45–80° (its tangent 1–5.7), without trigonometry.
+            let tan = 1.0 + 4.7 * h(1);
+            let (cos, sin) = (
+                1.0 / (1.0 + tan * tan).sqrt(),
+                tan / (1.0 + tan * tan).sqrt(),
+            );
+            let l = max_len * (0.5 + 0.5 * h(2));
+            // The junction on the parent, and the tributary's head upstream of it, on its side.
+            let (jx, jy) = (seg.a.0 + ux * xk, seg.a.1 + uy * xk);
+            let (tx, ty) = (-cos * l, side * sin * l);
+            let head = (jx + ux * tx - uy * ty, jy + uy * tx + ux * ty);
+            let bed_j = seg.bed_a + (seg.bed_b - seg.bed_a) * (xk / len);
+            // The head lies l·sin θ out on the parent's wall: its bed climbs part of that rise.
+            let trib = Seg {
+                a: head,
+                b: (jx, jy),
+                bed_a: bed_j + TRIB_BED_SHARE * slope * l * sin,
+                bed_b: bed_j,
+            };
+            let dt = seg_distance(&trib, p);
+            if dt >= rho + fade {
+                continue;
+            }
+            // Over the outer part of its reach, blended up to its parent's own surface: at the
+            // edge it is nowhere below its parent, so leaving it out there changes nothing.
+            let x = ((dt - rho) / fade).clamp(0.0, 1.0);
+            let steeper = (slope * TRIB_STEEPER)
+                .min(MAX_TRIB_SLOPE_M_PER_KM)
+                .max(slope);
+            let sub = self.surface(&trib, p, level + 1, steeper, m);
+            best = best.min(sub + x * x * (own - sub).max(0.0));
+        }
+        best
+    }
+}
+
+/// Closed pits of a heightmap under D8 flow routing.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PitShare {
+    /// Cells above sea level (elevation > 0) counted.
+    pub land_cells: usize,
+    /// Of those, cells in closed pits deeper than the depth asked (their level once every
+    /// depression is filled to its spill point, less their elevation).
+    pub pit_cells: usize,
+}
+
+impl PitShare {
+    /// Pit cells as a share of the land cells (0 without land).
+    pub fn share(&self) -> f64 {
+        if self.land_cells == 0 {
+            0.0
+        } else {
+            self.pit_cells as f64 / self.land_cells as f64
+        }
+    }
+}
+
+/// The closed pits of a `width × height` heightmap `z` (row-major, metres) under D8 routing:
+/// every depression is filled to its spill point (priority flood from the map's border and
+/// from the sea, cells at or below 0 m), and a land cell counts as a pit when its filled level
+/// is more than `min_depth_m` above it. Cells with `skip[i]` set (lakes the coarse network
+/// records, say) are left out of the count but still drain. NaN counts as sea.
+pub fn pit_share(
+    z: &[f32],
+    width: usize,
+    height: usize,
+    min_depth_m: f32,
+    skip: Option<&[bool]>,
+) -> PitShare {
+    pit_depths(z, width, height, min_depth_m, skip, &mut Vec::new())
+}
+
+/// [`pit_share`], also giving every cell's depth below its filled level in `depth_m` (0 outside
+/// depressions), metres.
+pub fn pit_depths(
+    z: &[f32],
+    width: usize,
+    height: usize,
+    min_depth_m: f32,
+    skip: Option<&[bool]>,
+    depth_m: &mut Vec<f32>,
+) -> PitShare {
+    use std::cmp::Reverse;
+    use std::collections::BinaryHeap;
+    let n = width * height;
+    assert_eq!(z.len(), n, "heightmap size");
+    let key = |v: f32| -> u32 {
+        // Order-preserving bits of an f32.
+        let b = v.to_bits();
+        if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
+    };
+    let mut level = vec![f32::NAN; n];
+    let mut done = vec![false; n];
+    let mut heap = BinaryHeap::new();
+    for i in 0..n {
+        let (x, y) = (i % width, i / width);
+        let sea = !(z[i] > 0.0);
+        if sea || x == 0 || y == 0 || x + 1 == width || y + 1 == height {
+            let v = if sea { 0.0f32.min(z[i]) } else { z[i] };
+            let v = if v.is_nan() { 0.0 } else { v };
+            level[i] = v;
+            done[i] = true;
+            heap.push(Reverse((key(v), i as u32)));
+        }
+    }
+    while let Some(Reverse((_, i))) = heap.pop() {
+        let i = i as usize;
+        let (x, y) = ((i % width) as isize, (i / width) as isize);
+        let li = level[i];
+        for dy in -1..=1isize {
+            for dx in -1..=1isize {
+                let (nx, ny) = (x + dx, y + dy);
+                if (dx == 0 && dy == 0)
+                    || nx < 0
+                    || ny < 0
+                    || nx >= width as isize
+                    || ny >= height as isize
+                {
+                    continue;
+                }
+                let j = ny as usize * width + nx as usize;
+                if done[j] {
+                    continue;
+                }
+                done[j] = true;
+                let lj = z[j].max(li);
+                level[j] = lj;
+                heap.push(Reverse((key(lj), j as u32)));
+            }
+        }
+    }
+    let mut s = PitShare::default();
+    depth_m.clear();
+    depth_m.extend(level.iter().zip(z).map(|(l, z)| (l - z).max(0.0)));
+    for i in 0..n {
+        if !(z[i] > 0.0) || skip.is_some_and(|k| k[i]) {
+            continue;
+        }
+        s.land_cells += 1;
+        if level[i] - z[i] > min_depth_m {
+            s.pit_cells += 1;
+        }
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bowl_is_a_pit_and_a_slope_is_not() {
+        let (w, h) = (40, 30);
+        let slope: Vec<f32> = (0..w * h).map(|i| 5.0 + (i % w) as f32 * 10.0).collect();
+        assert_eq!(pit_share(&slope, w, h, 10.0, None).pit_cells, 0);
+        let bowl: Vec<f32> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32 - 20.0, (i / w) as f32 - 15.0);
+                100.0 + (x * x + y * y).sqrt() * 5.0 - 60.0 * (-(x * x + y * y) / 20.0).exp()
+            })
+            .collect();
+        let s = pit_share(&bowl, w, h, 10.0, None);
+        assert!(s.pit_cells > 5, "{s:?}");
+        assert_eq!(s.land_cells, w * h);
+        // Skipped cells are not counted.
+        let skip = vec![true; w * h];
+        assert_eq!(pit_share(&bowl, w, h, 10.0, Some(&skip)).land_cells, 0);
+    }
+}

@@ -5,7 +5,7 @@
 
 use glam::DVec3;
 use tectonic_planets::amplify::{Amplifier, AmplifyOptions, pit_share};
-use tectonic_planets::geometry::{SphereMesh, from_lat_lon_deg};
+use tectonic_planets::geometry::SphereMesh;
 use tectonic_planets::io::export::{GeoGrid, parse_resolution};
 use tectonic_planets::io::rivers::{NetworkOptions, RiverNetwork};
 use tectonic_planets::prelude::*;
@@ -63,8 +63,8 @@ fn amplified_tile_drains_to_few_closed_pits() {
     let (mesh, crust) = continent(500_000);
     let net = network(&mesh, &crust);
     let plain = Amplifier::new(&mesh, &crust, 3, AmplifyOptions::default());
-    let carved =
-        Amplifier::new(&mesh, &crust, 3, AmplifyOptions::default()).with_valleys(&net.drainage);
+    let carved = Amplifier::new(&mesh, &crust, 3, AmplifyOptions::default())
+        .with_valleys(net.valley_network());
     // Two tiles: the range's flank, and the plains towards the coast.
     for (lat0, lon0) in [(4.0, 34.0), (-10.0, 47.0)] {
         let (z0, w, h) = tile(&plain, lat0, lon0, 0.5);
@@ -87,8 +87,8 @@ fn amplified_tile_drains_to_few_closed_pits() {
 fn coarse_rivers_run_in_valleys_whose_floors_fall_downstream() {
     let (mesh, crust) = continent(40_000);
     let net = network(&mesh, &crust);
-    let amp =
-        Amplifier::new(&mesh, &crust, 3, AmplifyOptions::default()).with_valleys(&net.drainage);
+    let amp = Amplifier::new(&mesh, &crust, 3, AmplifyOptions::default())
+        .with_valleys(net.valley_network());
     let d = &net.drainage;
     // The largest land reaches whose both ends are land.
     let mut reaches: Vec<usize> = (0..mesh.len())
@@ -142,8 +142,8 @@ fn coarse_rivers_run_in_valleys_whose_floors_fall_downstream() {
 fn carved_tiles_match_their_union_at_any_thread_count() {
     let (mesh, crust) = continent(20_000);
     let net = network(&mesh, &crust);
-    let amp =
-        Amplifier::new(&mesh, &crust, 5, AmplifyOptions::default()).with_valleys(&net.drainage);
+    let amp = Amplifier::new(&mesh, &crust, 5, AmplifyOptions::default())
+        .with_valleys(net.valley_network());
     let px = parse_resolution("100m", RADIUS_KM).unwrap();
     let a = GeoGrid::region(3.0, 33.0, 3.2, 33.2, px).unwrap();
     let b = GeoGrid {

@@ -188,10 +188,10 @@ impl<'a> Amplifier<'a> {
         self
     }
 
-    /// Carves the river valleys of `drainage` (the network of the crust this amplifier was
-    /// built from, on the same mesh) into the relief: see [`valleys`].
-    pub fn with_valleys(mut self, drainage: &crate::systems::relief::drainage::Drainage) -> Self {
-        self.valleys = Some(Valleys::new(self.mesh, drainage, &self.vertices));
+    /// Carves the river valleys of `network` (the drainage network of the crust this amplifier
+    /// was built from, on the same mesh) into the relief: see [`valleys`].
+    pub fn with_valleys(mut self, network: valleys::Network<'_>) -> Self {
+        self.valleys = Some(Valleys::new(self.mesh, network, &self.vertices));
         self
     }
 

@@ -3,7 +3,7 @@
 //! the closed pits a heightmap has ([`pit_share`]).
 //!
 //! **The network.** Every land sample of the resampled crust drains to one neighbour (its
-//! receiver, [`crate::systems::relief::drainage::Drainage`]). Each such edge is a reach of river:
+//! receiver; [`Network`], from the relief's drainage network). Each such edge is a reach of river:
 //! a straight segment (a chord of the sphere) from the sample to its receiver, with the
 //! sample's drainage area.
 //!
@@ -30,8 +30,7 @@
 use glam::DVec3;
 
 use crate::geometry::SphereMesh;
-use crate::random::{hash3, unit_f64};
-use crate::systems::relief::drainage::Drainage;
+use crate::random::hash3;
 
 use super::procedural::{AmplifyQuery, AmplifyVertex, relief_amplitude_m};
 
@@ -68,6 +67,23 @@ const REACH_FADE_SHARE: f64 = 0.3;
 const MIN_WALL_SLOPE: f64 = 0.01;
 const MAX_WALL_SLOPE: f64 = 0.8;
 
+/// A drainage network, as the valleys read it: per sample, the same slices as the relief's
+/// `Drainage` (see `crate::io::rivers::RiverNetwork::valley_network`).
+#[derive(Clone, Copy, Debug)]
+pub struct Network<'a> {
+    /// Downstream sample of each land sample; ocean samples and endorheic sinks point to
+    /// themselves.
+    pub receiver: &'a [u32],
+    /// Land samples, each after its receiver.
+    pub stack: &'a [u32],
+    /// Drainage area of each land sample, km².
+    pub area_km2: &'a [f64],
+    /// Water surface of each land sample (a lake's level, or its elevation), km.
+    pub water_level_km: &'a [f32],
+    /// True for ocean samples.
+    pub ocean: &'a [bool],
+}
+
 /// The river valleys of a crust's drainage network, ready to carve amplified relief.
 #[derive(Clone, Debug)]
 pub struct Valleys {
@@ -81,6 +97,9 @@ pub struct Valleys {
     slope: Vec<f32>,
     /// Amplitude of each sample's relief primitive, metres.
     amp_m: Vec<f32>,
+    /// The plane of each sample's reach: unit vectors downstream and to its left (chords: a
+    /// reach is a few tens of km on a planet of thousands), and its length, km (0: no reach).
+    frame: Vec<(DVec3, DVec3, f64)>,
     /// Largest distance from a reach at which it can carve, km.
     reach_km: f64,
     /// The reaches that can carve each cell of a cubic grid over the unit sphere (cells
@@ -91,12 +110,17 @@ pub struct Valleys {
     reaches: Vec<u32>,
     /// Planet radius, km.
     radius_km: f64,
+    /// Tributary levels (see [`trib_levels`]).
+    levels: Vec<TribLevel>,
+    /// How far the tributaries of all levels reach from their reach, km (their longest runs
+    /// added up).
+    trib_reach_km: f64,
 }
 
 impl Valleys {
     /// The valleys of `drainage` (a network of the crust whose amplification `vertices` are),
     /// on `mesh`.
-    pub fn new(mesh: &SphereMesh, drainage: &Drainage, vertices: &[AmplifyVertex]) -> Self {
+    pub fn new(mesh: &SphereMesh, drainage: Network<'_>, vertices: &[AmplifyVertex]) -> Self {
         let n = mesh.len();
         let spacing_km = mesh.mean_spacing_rad() * mesh.radius_km;
         let max_floor = MAX_FLOOR_KM.min(0.15 * spacing_km);
@@ -105,11 +129,15 @@ impl Valleys {
         let mut floor_km = vec![0.0f32; n];
         let mut slope = vec![0.0f32; n];
         let amp_m: Vec<f32> = vertices.iter().map(relief_amplitude_m).collect();
-        let ok = drainage.receiver.len() == n && vertices.len() == n;
+        let ok = drainage.receiver.len() == n
+            && drainage.area_km2.len() == n
+            && drainage.water_level_km.len() == n
+            && drainage.ocean.len() == n
+            && vertices.len() == n;
         if ok {
             // Beds, from the outlets upstream (the stack lists every land sample after its
             // receiver).
-            for &i in &drainage.stack {
+            for &i in drainage.stack {
                 let i = i as usize;
                 let r = drainage.receiver[i] as usize;
                 let amp = f64::from(relief_amplitude_m(&vertices[i]));
@@ -139,8 +167,32 @@ impl Valleys {
             }
         }
         let reach_km = REACH_SPACINGS * spacing_km;
-        let cell = 2.0 * reach_km / mesh.radius_km;
+        let levels = trib_levels(spacing_km);
+        let cell = reach_km / mesh.radius_km;
+        let frame = (0..n)
+            .map(|i| {
+                let r = receiver[i];
+                if r == u32::MAX {
+                    return (DVec3::ZERO, DVec3::ZERO, 0.0);
+                }
+                let (a, b) = (mesh.positions[i], mesh.positions[r as usize]);
+                let ab = b - a;
+                let len = ab.length() * mesh.radius_km;
+                if len <= 0.0 {
+                    return (DVec3::ZERO, DVec3::ZERO, 0.0);
+                }
+                let u = ab.normalize();
+                (u, a.cross(u).normalize_or_zero(), len)
+            })
+            .collect();
+        let t = std::time::Instant::now();
         let (keys, starts, reaches) = reach_grid(mesh, &receiver, cell, reach_km / mesh.radius_km);
+        tracing::debug!(
+            cells = keys.len(),
+            entries = reaches.len(),
+            ms = t.elapsed().as_secs_f64() * 1e3,
+            "valleys' reach grid"
+        );
         Self {
             cell,
             keys,
@@ -151,7 +203,10 @@ impl Valleys {
             floor_km,
             slope,
             amp_m,
+            frame,
             reach_km,
+            trib_reach_km: levels.iter().map(|l| l.max_len_km).sum(),
+            levels,
             radius_km: mesh.radius_km,
         }
     }
@@ -181,7 +236,8 @@ impl Valleys {
             Ok(c) => &self.reaches[self.starts[c] as usize..self.starts[c + 1] as usize],
             Err(_) => return cap as f32, // no reach comes this close
         };
-        let mut surface = f64::INFINITY;
+        // Nothing above the cap matters.
+        let mut surface = cap;
         let m = (1.0 + MOD_GAIN * f64::from(amplified - base) / amp_here)
             .clamp(MOD_RANGE.0, MOD_RANGE.1);
         let mut visit = |i: usize| {
@@ -190,17 +246,11 @@ impl Valleys {
                 return;
             }
             let r = r as usize;
-            let (a, b) = (mesh.positions[i], mesh.positions[r]);
-            // The reach's plane: x downstream, y to its left, km (chords: a reach is a few tens
-            // of km on a planet of thousands).
-            let ab = b - a;
-            let len = ab.length() * self.radius_km;
+            let (u, nrm, len) = self.frame[i];
             if len <= 0.0 {
                 return;
             }
-            let u = ab.normalize();
-            let nrm = a.cross(u).normalize_or_zero();
-            let rel = (p - a) * self.radius_km;
+            let rel = (p - mesh.positions[i]) * self.radius_km;
             let (x, y) = (rel.dot(u), rel.dot(nrm));
             // Distance to the reach's course; beyond the reach it offers nothing, and over its
             // outer part its surface is lifted out of the way (continuous, so no seam where a
@@ -221,6 +271,7 @@ impl Valleys {
                 slope_m_per_km: 1000.0 * f64::from(self.slope[i]),
                 floor_km: f64::from(self.floor_km[i]),
                 key: i as u64,
+                levels: &self.levels,
             };
             let seg = Seg {
                 a: (0.0, 0.0),
@@ -228,6 +279,15 @@ impl Valleys {
                 bed_a,
                 bed_b,
             };
+            // No valley of this reach's comes below its lowest bed plus the wall climbed from
+            // the nearest its tributaries reach: skip it if that is no lower than what is there.
+            let bound = bed_a.min(bed_b)
+                + reach.slope_m_per_km
+                    * m
+                    * (d_main - self.trib_reach_km - reach.floor_km.max(TRIB_FLOOR_KM)).max(0.0);
+            if bound >= surface {
+                return;
+            }
             let s = reach.surface(&seg, (x, y), 0, reach.slope_m_per_km, m);
             // Over the outer part of the reach, blended up to the cap: at the reach's edge it is
             // nowhere below the cap, so leaving it out there changes nothing.
@@ -236,7 +296,7 @@ impl Valleys {
         for &i in candidates {
             visit(i as usize);
         }
-        surface.min(cap) as f32
+        surface as f32
     }
 }
 
@@ -276,6 +336,9 @@ fn reach_grid(
                 for y in idx(lo.y)..=idx(hi.y) {
                     for z in idx(lo.z)..=idx(hi.z) {
                         let c = DVec3::new(x as f64 + 0.5, y as f64 + 0.5, z as f64 + 0.5) * cell;
+                        if (c.length() - 1.0).abs() > half_diag {
+                            continue; // the cell holds no point of the sphere
+                        }
                         let t = ((c - a).dot(ab) / ab.length_squared().max(1e-30)).clamp(0.0, 1.0);
                         if (c - (a + ab * t)).length() <= reach + half_diag {
                             out.push((cell_key(c, cell), i as u32));
@@ -311,30 +374,71 @@ struct Seg {
     bed_b: f64,
 }
 
-/// Distance from `p` to segment `s`, km.
-fn seg_distance(s: &Seg, p: (f64, f64)) -> f64 {
+/// Squared distance from `p` to segment `s`, km².
+fn seg_distance2(s: &Seg, p: (f64, f64)) -> f64 {
     let (dx, dy) = (s.b.0 - s.a.0, s.b.1 - s.a.1);
     let (rx, ry) = (p.0 - s.a.0, p.1 - s.a.1);
     let t = ((rx * dx + ry * dy) / (dx * dx + dy * dy).max(1e-30)).clamp(0.0, 1.0);
-    ((rx - dx * t).powi(2) + (ry - dy * t).powi(2)).sqrt()
+    (rx - dx * t).powi(2) + (ry - dy * t).powi(2)
 }
 
-/// What a reach's valleys share: the main valley's wall slope and floor, the random key.
-struct Reach {
+/// What a reach's valleys share: the main valley's wall slope and floor, the random key, and
+/// the tributary levels of the mesh.
+struct Reach<'a> {
     slope_m_per_km: f64,
     floor_km: f64,
     key: u64,
+    levels: &'a [TribLevel],
 }
 
-/// Tributary levels below a reach.
-const LEVELS: usize = 2;
-/// Spacing of tributary junctions along their parent, km, per level.
-const TRIB_SPACING_KM: [f64; LEVELS] = [5.0, 1.5];
-/// Longest tributary, km, per level.
-const TRIB_LENGTH_KM: [f64; LEVELS] = [14.0, 3.0];
-/// Distance from a tributary's course within which it carves, km, per level (it is lifted out
-/// of the way over half as much again).
-const TRIB_INFLUENCE_KM: [f64; LEVELS] = [4.0, 1.5];
+/// One level of tributaries: junction spacing along the parent, longest tributary, and the
+/// distance from its course within which a tributary carves (it is blended out of the way over
+/// half as much again), km.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct TribLevel {
+    spacing_km: f64,
+    max_len_km: f64,
+    influence_km: f64,
+}
+
+/// Most tributary levels below a reach.
+const MAX_LEVELS: usize = 4;
+/// The first level on a mesh of 500,000 samples (32 km spacing): junctions every 5 km,
+/// tributaries up to 14 km long, carving within 4 km; it scales with the mesh spacing, so that
+/// the tributaries fill the land between reaches at any resolution.
+const FIRST_LEVEL: TribLevel = TribLevel {
+    spacing_km: 5.0,
+    max_len_km: 14.0,
+    influence_km: 4.0,
+};
+/// Mesh spacing the first level is given for, km.
+const FIRST_LEVEL_SPACING_KM: f64 = 32.0;
+/// Each level below is this much smaller (spacing, length, influence).
+const LEVEL_RATIO: (f64, f64, f64) = (0.3, 0.21, 0.375);
+/// Levels stop once the junctions would come closer than this, km (a 100 m map shows valleys
+/// about a kilometre apart).
+const FINEST_SPACING_KM: f64 = 0.9;
+
+/// The tributary levels of a mesh of mean spacing `spacing_km`.
+fn trib_levels(spacing_km: f64) -> Vec<TribLevel> {
+    let s = (spacing_km / FIRST_LEVEL_SPACING_KM).max(0.25);
+    let mut l = TribLevel {
+        spacing_km: FIRST_LEVEL.spacing_km * s,
+        max_len_km: FIRST_LEVEL.max_len_km * s,
+        influence_km: FIRST_LEVEL.influence_km * s,
+    };
+    let mut out = Vec::new();
+    while out.len() < MAX_LEVELS && (out.is_empty() || l.spacing_km >= FINEST_SPACING_KM) {
+        out.push(l);
+        l = TribLevel {
+            spacing_km: l.spacing_km * LEVEL_RATIO.0,
+            max_len_km: l.max_len_km * LEVEL_RATIO.1,
+            influence_km: l.influence_km * LEVEL_RATIO.2,
+        };
+    }
+    out
+}
+
 /// Rise of a tributary's bed across its parent's wall, as a share of the wall's rise.
 const TRIB_BED_SHARE: f64 = 0.3;
 /// A tributary's walls are this much steeper than its parent's.
@@ -344,8 +448,8 @@ const MAX_TRIB_SLOPE_M_PER_KM: f64 = 800.0;
 /// Half-width of a tributary's floor, km.
 const TRIB_FLOOR_KM: f64 = 0.08;
 
-impl Reach {
-    /// The lowest valley surface of `seg` and its tributaries (to depth [`LEVELS`]) at `p`,
+impl Reach<'_> {
+    /// The lowest valley surface of `seg` and its tributaries (to the last level) at `p`,
     /// metres; `slope` is `seg`'s wall slope (m/km), `m` the point's wall factor.
     fn surface(&self, seg: &Seg, p: (f64, f64), level: usize, slope: f64, m: f64) -> f64 {
         let (dx, dy) = (seg.b.0 - seg.a.0, seg.b.1 - seg.a.1);
@@ -367,15 +471,15 @@ impl Reach {
         let out = (d - floor).max(0.0);
         let own = seg.bed_a + (seg.bed_b - seg.bed_a) * t + slope * m * out;
         let mut best = own;
-        if level >= LEVELS {
+        let Some(lv) = self.levels.get(level) else {
             return best;
-        }
-        let (spacing, max_len) = (TRIB_SPACING_KM[level], TRIB_LENGTH_KM[level]);
+        };
+        let (spacing, max_len) = (lv.spacing_km, lv.max_len_km);
         let max_len = max_len.min(0.6 * len.max(spacing));
         // A tributary carves within `rho` of its course and is lifted out of the way over the
         // next `fade` (so that it ends without a step); every tributary lies within `max_len` of
         // its parent.
-        let rho = TRIB_INFLUENCE_KM[level];
+        let rho = lv.influence_km;
         let fade = 0.5 * rho;
         if d > max_len + rho + fade {
             return best;
@@ -400,13 +504,13 @@ impl Reach {
             .flat_map(|&side| (k0..=k1).map(move |k| (side, k)))
         {
             let kk = k as u64;
-            let h = |n: u64| {
-                unit_f64(hash3(
-                    self.key,
-                    0x7661_6c6c + level as u64,
-                    kk << 8 | n << 1 | u64::from(side > 0.0),
-                ))
-            };
+            // One hash, three 21-bit uniforms: the junction's jitter, the angle, the length.
+            let bits = hash3(
+                self.key,
+                0x7661_6c6c + level as u64,
+                kk << 1 | u64::from(side > 0.0),
+            );
+            let h = |n: u64| ((bits >> (21 * n)) & 0x1f_ffff) as f64 / (1u64 << 21) as f64;
             let xk = (kk as f64 + 0.5 + 0.6 * (h(0) - 0.5)) * spacing;
             if !(0.0..=len).contains(&xk) {
                 continue;
@@ -430,10 +534,11 @@ impl Reach {
                 bed_a: bed_j + TRIB_BED_SHARE * slope * l * sin,
                 bed_b: bed_j,
             };
-            let dt = seg_distance(&trib, p);
-            if dt >= rho + fade {
+            let dt2 = seg_distance2(&trib, p);
+            if dt2 >= reach * reach {
                 continue;
             }
+            let dt = dt2.sqrt();
             // Over the outer part of its reach, blended up to its parent's own surface: at the
             // edge it is nowhere below its parent, so leaving it out there changes nothing.
             let x = ((dt - rho) / fade).clamp(0.0, 1.0);

@@ -338,8 +338,11 @@ pub(crate) fn write_extra_exports_on(
         amp = amp.with_exemplars(set, seed, options);
     }
     if !e.no_valleys && e.relief_scale != 0.0 {
-        let rivers = rivers.get_or_insert_with(|| RiverNetwork::of(mesh, &view, network_opts));
-        amp = amp.with_valleys(&rivers.drainage);
+        // The valleys keep what they need of the network; it goes before the rows are made.
+        let rivers = rivers
+            .take()
+            .unwrap_or_else(|| RiverNetwork::of(mesh, &view, network_opts));
+        amp = amp.with_valleys(rivers.valley_network());
     }
     say("amplification tables", t);
     if e.amplified {

@@ -64,6 +64,19 @@ impl RiverNetwork {
         Self::on_graph(&relief_graph(mesh), &mesh.positions, crust, opts)
     }
 
+    /// The network as the amplified relief's valleys read it
+    /// ([`crate::amplify::Amplifier::with_valleys`]).
+    pub fn valley_network(&self) -> crate::amplify::valleys::Network<'_> {
+        let d = &self.drainage;
+        crate::amplify::valleys::Network {
+            receiver: &d.receiver,
+            stack: &d.stack,
+            area_km2: &d.area_km2,
+            water_level_km: &d.water_level_km,
+            ocean: &d.ocean,
+        }
+    }
+
     /// [`Self::of`] on a sample graph already built (see [`relief_graph`]; `positions`: its
     /// unit positions).
     pub fn on_graph(

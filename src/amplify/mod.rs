@@ -191,7 +191,12 @@ impl<'a> Amplifier<'a> {
     /// Carves the river valleys of `network` (the drainage network of the crust this amplifier
     /// was built from, on the same mesh) into the relief: see [`valleys`].
     pub fn with_valleys(mut self, network: valleys::Network<'_>) -> Self {
-        self.valleys = Some(Valleys::new(self.mesh, network, &self.vertices));
+        self.valleys = Some(Valleys::new(
+            self.mesh,
+            network,
+            &self.vertices,
+            self.uniform.seed,
+        ));
         self
     }
 

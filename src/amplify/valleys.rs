@@ -32,7 +32,7 @@ use glam::DVec3;
 use crate::geometry::SphereMesh;
 use crate::random::hash3;
 
-use super::procedural::{AmplifyQuery, AmplifyVertex, relief_amplitude_m};
+use super::procedural::{AmplifyQuery, AmplifyVertex, noise3, relief_amplitude_m};
 
 /// No bed (ocean samples, samples without a reach).
 const NO_BED: f32 = f32::NAN;
@@ -44,6 +44,10 @@ const MAX_FLOOR_KM: f64 = 4.0;
 /// and its least value, metres.
 const INCISION_SHARE: f64 = 0.6;
 const MIN_INCISION_M: f64 = 10.0;
+/// Largest displacement of the valleys' warp, as a share of the first tributaries' spacing, and
+/// its wavelength, in the same unit.
+const WARP_SHARE: f64 = 0.15;
+const WARP_WAVELENGTH_SHARE: f64 = 1.5;
 /// How much the primitives' relief steepens or flattens the valleys' walls: the walls' slope
 /// is multiplied by 1 + this × (relief / amplitude), within [`MOD_RANGE`].
 const MOD_GAIN: f64 = 0.6;
@@ -112,6 +116,8 @@ pub struct Valleys {
     radius_km: f64,
     /// Tributary levels (see [`trib_levels`]).
     levels: Vec<TribLevel>,
+    /// Noise seed of the warp.
+    seed: u32,
     /// How far the tributaries of all levels reach from their reach, km (their longest runs
     /// added up).
     trib_reach_km: f64,
@@ -120,7 +126,12 @@ pub struct Valleys {
 impl Valleys {
     /// The valleys of `drainage` (a network of the crust whose amplification `vertices` are),
     /// on `mesh`.
-    pub fn new(mesh: &SphereMesh, drainage: Network<'_>, vertices: &[AmplifyVertex]) -> Self {
+    pub fn new(
+        mesh: &SphereMesh,
+        drainage: Network<'_>,
+        vertices: &[AmplifyVertex],
+        seed: u32,
+    ) -> Self {
         let n = mesh.len();
         let spacing_km = mesh.mean_spacing_rad() * mesh.radius_km;
         let max_floor = MAX_FLOOR_KM.min(0.15 * spacing_km);
@@ -206,9 +217,30 @@ impl Valleys {
             frame,
             reach_km,
             trib_reach_km: levels.iter().map(|l| l.max_len_km).sum(),
+            seed,
             levels,
             radius_km: mesh.radius_km,
         }
+    }
+
+    /// `p` moved within the tangent plane by a smooth random field (at most about
+    /// [`WARP_SHARE`] of the first tributaries' spacing), so that valleys wind instead of
+    /// running straight; small enough against its wavelength that the warp folds nothing over.
+    fn warp(&self, p: DVec3) -> DVec3 {
+        let Some(first) = self.levels.first() else {
+            return p;
+        };
+        let wl = WARP_WAVELENGTH_SHARE * first.spacing_km;
+        let f = (self.radius_km / wl) as f32;
+        let (x, y, z) = (p.x as f32 * f, p.y as f32 * f, p.z as f32 * f);
+        let s = self.seed ^ 0x7761_7270;
+        let w = DVec3::new(
+            f64::from(noise3(s, x, y, z)),
+            f64::from(noise3(s.wrapping_add(1), x, y, z)),
+            f64::from(noise3(s.wrapping_add(2), x, y, z)),
+        );
+        let w = w - p * p.dot(w);
+        (p + w * (WARP_SHARE * first.spacing_km / self.radius_km)).normalize()
     }
 
     /// The carved elevation at query `q`, metres: `amplified` (the primitives' value there)
@@ -216,7 +248,11 @@ impl Valleys {
     /// barycentric one).
     pub fn carve(&self, mesh: &SphereMesh, q: &AmplifyQuery, base: f32, amplified: f32) -> f32 {
         let corners = [q.c0 as usize, q.c1 as usize, q.c2 as usize];
-        let p = DVec3::new(f64::from(q.dx), f64::from(q.dy), f64::from(q.dz));
+        let p = self.warp(DVec3::new(
+            f64::from(q.dx),
+            f64::from(q.dy),
+            f64::from(q.dz),
+        ));
         let amp_here = f64::from(
             q.w0 * self.amp_m[corners[0]]
                 + q.w1 * self.amp_m[corners[1]]

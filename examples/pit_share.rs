@@ -2,7 +2,10 @@
 //! PNG heightmap with its JSON sidecar (`planet export --amplified`) and prints the share of
 //! the land in closed pits deeper than the depth given.
 //!
-//! `cargo run --release --example pit_share -- DIR/tile_amplified16.png [DEPTH_M [MASK.png]]`
+//! `cargo run --release --example pit_share -- DIR/tile_amplified16.png [DEPTH_M [MASK.png
+//! [CRUST.tif]]]`: with the crust's elevation on the same grid (`tile_crust_elevation.tif` of
+//! `--geotiff`), also the share outside the crust's own closed depressions (the coarse
+//! network's closed basins and lakes), which the valleys keep.
 
 use std::path::Path;
 
@@ -22,7 +25,29 @@ fn main() {
     };
     let mut depths = Vec::new();
     let s = tectonic_planets::amplify::pit_depths(&z, w, h, depth, None, &mut depths);
-    if let Some(mask) = args.get(3) {
+    if let Some(crust) = args.get(4).filter(|a| !a.is_empty()) {
+        let bytes = std::fs::read(crust).expect("read the crust GeoTIFF");
+        let c = tectonic_planets::io::geotiff::read_single_band(&bytes)
+            .expect("a single-band GeoTIFF")
+            .values;
+        assert_eq!(
+            c.len(),
+            z.len(),
+            "the crust GeoTIFF is not on the same grid"
+        );
+        let mut cd = Vec::new();
+        tectonic_planets::amplify::pit_depths(&c, w, h, depth, None, &mut cd);
+        let skip: Vec<bool> = cd.iter().map(|&d| d > depth).collect();
+        let o = tectonic_planets::amplify::pit_share(&z, w, h, depth, Some(&skip));
+        println!(
+            "outside the crust's own depressions ({:.2}% of the land): {} of {} cells ({:.2}%)",
+            100.0 * (1.0 - o.land_cells as f64 / s.land_cells.max(1) as f64),
+            o.pit_cells,
+            o.land_cells,
+            100.0 * o.share()
+        );
+    }
+    if let Some(mask) = args.get(3).filter(|a| !a.is_empty()) {
         // Pits deeper than the depth in red over grey elevation.
         let (lo, hi) = z
             .iter()

@@ -12,7 +12,9 @@
 //! (so that the noise of the primitives never reaches below the floor of a valley), raised where
 //! needed so that no bed lies below its receiver's (walked from the outlets upstream): beds fall
 //! monotonically to the sea, or to the floor of a closed basin. An ocean receiver's bed is sea
-//! level. Along a reach the bed is linear between its two ends.
+//! level. A sample that drains to no sea keeps its water level as its bed (no incision): the
+//! valleys would otherwise deepen and widen its closed basin. Along a reach the bed is linear
+//! between its two ends.
 //!
 //! **The valley.** At a point, each reach near it offers a surface: its bed at the point's
 //! projection on the reach, plus a wall rising at a slope set by the relief around the reach
@@ -47,6 +49,8 @@ const MIN_INCISION_M: f64 = 10.0;
 /// Largest displacement of the valleys' warp, as a share of the first tributaries' spacing, and
 /// its wavelength, in the same unit.
 const WARP_SHARE: f64 = 0.15;
+/// Bound on the length of the warp's noise vector (three noise3 values, each within ±1.5).
+const WARP_MAX: f64 = 2.6;
 const WARP_WAVELENGTH_SHARE: f64 = 1.5;
 /// How much the primitives' relief steepens or flattens the valleys' walls: the walls' slope
 /// is multiplied by 1 + this × (relief / amplitude), within [`MOD_RANGE`].
@@ -86,6 +90,18 @@ pub struct Network<'a> {
     pub water_level_km: &'a [f32],
     /// True for ocean samples.
     pub ocean: &'a [bool],
+}
+
+/// Whether each land sample of `network` drains to the sea (false for samples that drain to a
+/// closed basin's sink, and for ocean samples).
+pub fn drains_to_sea(network: Network<'_>) -> Vec<bool> {
+    let mut open = vec![false; network.receiver.len()];
+    for &i in network.stack {
+        let i = i as usize;
+        let r = network.receiver[i] as usize;
+        open[i] = r != i && (network.ocean[r] || open[r]);
+    }
+    open
 }
 
 /// The river valleys of a crust's drainage network, ready to carve amplified relief.
@@ -146,6 +162,7 @@ impl Valleys {
             && drainage.ocean.len() == n
             && vertices.len() == n;
         if ok {
+            let open = drains_to_sea(drainage);
             // Beds, from the outlets upstream (the stack lists every land sample after its
             // receiver).
             for &i in drainage.stack {
@@ -153,9 +170,16 @@ impl Valleys {
                 let r = drainage.receiver[i] as usize;
                 let amp = f64::from(relief_amplitude_m(&vertices[i]));
                 let level = 1000.0 * f64::from(drainage.water_level_km[i]);
-                let raw = level - (INCISION_SHARE * amp).max(MIN_INCISION_M);
+                // A sample draining to no sea (to a closed basin's sink) keeps its level: cut
+                // below it, the valleys would deepen and widen the closed basin, all of it
+                // draining into its sink.
+                let raw = if !open[i] {
+                    level
+                } else {
+                    level - (INCISION_SHARE * amp).max(MIN_INCISION_M)
+                };
                 let below = if r == i {
-                    f64::NEG_INFINITY
+                    level
                 } else if drainage.ocean[r] {
                     0.0
                 } else {
@@ -197,7 +221,11 @@ impl Valleys {
             })
             .collect();
         let t = std::time::Instant::now();
-        let (keys, starts, reaches) = reach_grid(mesh, &receiver, cell, reach_km / mesh.radius_km);
+        let warp_km = levels
+            .first()
+            .map_or(0.0, |l| WARP_MAX * WARP_SHARE * l.spacing_km);
+        let (keys, starts, reaches) =
+            reach_grid(mesh, &receiver, cell, (reach_km + warp_km) / mesh.radius_km);
         tracing::debug!(
             cells = keys.len(),
             entries = reaches.len(),
@@ -248,11 +276,7 @@ impl Valleys {
     /// barycentric one).
     pub fn carve(&self, mesh: &SphereMesh, q: &AmplifyQuery, base: f32, amplified: f32) -> f32 {
         let corners = [q.c0 as usize, q.c1 as usize, q.c2 as usize];
-        let p = self.warp(DVec3::new(
-            f64::from(q.dx),
-            f64::from(q.dy),
-            f64::from(q.dz),
-        ));
+        let p0 = DVec3::new(f64::from(q.dx), f64::from(q.dy), f64::from(q.dz));
         let amp_here = f64::from(
             q.w0 * self.amp_m[corners[0]]
                 + q.w1 * self.amp_m[corners[1]]
@@ -268,10 +292,13 @@ impl Valleys {
         let relief = f64::from(amplified - base);
         let land_cap = f64::from(base) + CAP_AMPS * amp_here + relief.max(0.0);
         let cap = f64::from(amplified) + (land_cap - f64::from(amplified)) * land;
-        let candidates = match self.keys.binary_search(&cell_key(p, self.cell)) {
+        // The grid lists the reaches within reach of any point of a cell moved by at most the
+        // warp, so the cell of the point itself is the one to read.
+        let candidates = match self.keys.binary_search(&cell_key(p0, self.cell)) {
             Ok(c) => &self.reaches[self.starts[c] as usize..self.starts[c + 1] as usize],
             Err(_) => return cap as f32, // no reach comes this close
         };
+        let p = self.warp(p0);
         // Nothing above the cap matters.
         let mut surface = cap;
         let m = (1.0 + MOD_GAIN * f64::from(amplified - base) / amp_here)
@@ -324,7 +351,7 @@ impl Valleys {
             if bound >= surface {
                 return;
             }
-            let s = reach.surface(&seg, (x, y), 0, reach.slope_m_per_km, m);
+            let s = reach.surface(&seg, (x, y), 0, reach.slope_m_per_km, m, surface);
             // Over the outer part of the reach, blended up to the cap: at the reach's edge it is
             // nowhere below the cap, so leaving it out there changes nothing.
             surface = surface.min(s + t * t * (cap - s).max(0.0));
@@ -486,8 +513,10 @@ const TRIB_FLOOR_KM: f64 = 0.08;
 
 impl Reach<'_> {
     /// The lowest valley surface of `seg` and its tributaries (to the last level) at `p`,
-    /// metres; `slope` is `seg`'s wall slope (m/km), `m` the point's wall factor.
-    fn surface(&self, seg: &Seg, p: (f64, f64), level: usize, slope: f64, m: f64) -> f64 {
+    /// metres; `slope` is `seg`'s wall slope (m/km), `m` the point's wall factor. Tributaries
+    /// that cannot come below `ub` (what the point already has) are skipped: the answer is exact
+    /// wherever it is below `ub`.
+    fn surface(&self, seg: &Seg, p: (f64, f64), level: usize, slope: f64, m: f64, ub: f64) -> f64 {
         let (dx, dy) = (seg.b.0 - seg.a.0, seg.b.1 - seg.a.1);
         let len = (dx * dx + dy * dy).sqrt();
         if len <= 1e-9 {
@@ -581,7 +610,15 @@ impl Reach<'_> {
             let steeper = (slope * TRIB_STEEPER)
                 .min(MAX_TRIB_SLOPE_M_PER_KM)
                 .max(slope);
-            let sub = self.surface(&trib, p, level + 1, steeper, m);
+            // Nothing in the tributary's tree comes below its junction's bed plus the wall
+            // climbed from the nearest its own tributaries reach: skip it if that is no lower
+            // than what is there (the same bits: the minimum would not change).
+            let bound = best.min(ub);
+            let below: f64 = self.levels[level + 1..].iter().map(|l| l.max_len_km).sum();
+            if bed_j + steeper * m * (dt - below - TRIB_FLOOR_KM).max(0.0) >= bound {
+                continue;
+            }
+            let sub = self.surface(&trib, p, level + 1, steeper, m, bound);
             best = best.min(sub + x * x * (own - sub).max(0.0));
         }
         best

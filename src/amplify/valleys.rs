@@ -1,6 +1,7 @@
 //! River valleys in the amplified relief (issue 19, item 2): the simulation's drainage network
 //! carved into the detailed elevation, so that valley floors fall to the sea, and a measure of
-//! the closed pits a heightmap has ([`pit_share`]).
+//! the closed pits a heightmap has ([`pit_share`]). docs/amplification.md ("River valleys") has
+//! the constants' reasons and the measurements.
 //!
 //! **The network.** Every land sample of the resampled crust drains to one neighbour (its
 //! receiver; [`Network`], from the relief's drainage network). Each such edge is a reach of river:
@@ -8,26 +9,29 @@
 //! sample's drainage area.
 //!
 //! **The bed.** Each land sample gets a bed elevation: its water level (the coarse elevation, or
-//! a lake's surface) less an incision as deep as the relief primitives around it are high
-//! (so that the noise of the primitives never reaches below the floor of a valley), raised where
-//! needed so that no bed lies below its receiver's (walked from the outlets upstream): beds fall
-//! monotonically to the sea, or to the floor of a closed basin. An ocean receiver's bed is sea
-//! level. A sample that drains to no sea keeps its water level as its bed (no incision): the
-//! valleys would otherwise deepen and widen its closed basin. Along a reach the bed is linear
-//! between its two ends.
+//! a lake's surface) less an incision of 0.6 times the amplitude of the relief primitives around
+//! it, raised where needed so that no bed lies below its receiver's (walked from the outlets
+//! upstream): beds fall monotonically to the sea. An ocean receiver's bed is sea level. A sample
+//! that drains to no sea keeps its water level as its bed (no incision): the valleys would
+//! otherwise deepen and widen its closed basin. Along a reach the bed is linear.
 //!
-//! **The valley.** At a point, each reach near it offers a surface: its bed at the point's
+//! **The valleys.** At a point, each reach near it offers a surface: its bed at the point's
 //! projection on the reach, plus a wall rising at a slope set by the relief around the reach
 //! (steep in young ranges, gentle on plains) beyond a flat floor whose half-width grows with
-//! the square root of the drainage area. The detailed elevation is the lowest of the reaches'
-//! surfaces and the primitives' relief, whose noise fades out towards the floor. A function
-//! without local minima stays without them under such a minimum, so the floors drain: the
-//! closed pits left are those of the primitives' noise between valleys, and lakes.
+//! the square root of the drainage area. Each reach carries tributaries on two or three levels
+//! (junctions every few km, leaving at 45–80° upstream, beds climbing from the parent's, walls
+//! steeper), each blended into its parent's wall towards the end of its reach. The point is
+//! first moved by a smooth random field, so that the valleys wind.
 //!
-//! **Locality.** A point reads the reaches of the samples around its triangle (its corners and
-//! their neighbours), so a valley's half-width is capped at a third of the mesh spacing; the
-//! value at a point depends only on the point and the network, never on the tiling, the output
-//! size or the thread count.
+//! **The cap.** The detailed elevation is the lowest of all these surfaces and a cap: the crust
+//! plus half an amplitude plus the primitives' crests on land, the primitives' elevation at sea.
+//! A function without local minima stays without them under such a minimum, so the floors
+//! drain: the closed pits left are hollows ringed by the primitives' crests on the divides, and
+//! the coarse network's closed basins and lakes.
+//!
+//! **Locality.** A cubic grid over the unit sphere lists the reaches that can reach each cell;
+//! a point reads its own cell. The value at a point depends only on the point and the network,
+//! never on the tiling, the output size or the thread count.
 
 use glam::DVec3;
 

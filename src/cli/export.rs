@@ -318,7 +318,7 @@ pub(crate) fn write_extra_exports_on(
         let t = Instant::now();
         let rivers = rivers.insert(RiverNetwork::of(mesh, &view, network_opts));
         files.extend(export::export_drainage_layers(
-            mesh, &rivers, &grid, out, prefix,
+            mesh, rivers, &grid, out, prefix,
         )?);
         say(
             &format!("drainage GeoTIFFs {}x{}", grid.width, grid.height),

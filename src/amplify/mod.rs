@@ -196,19 +196,21 @@ impl<'a> Amplifier<'a> {
             network,
             &self.vertices,
             self.uniform.seed,
+            self.uniform.relief_scale,
         ));
         self
     }
 
     /// Elevation range (metres) that every amplified value lies in: the crust's range widened
-    /// by the largest relief.
+    /// by the largest relief (and above by the valleys' cap, when carved).
     pub fn range_m(&self) -> (f32, f32) {
         let r = if self.uniform.relief_scale == 0.0 {
             0.0
         } else {
             MAX_RELIEF_M
         };
-        (self.crust_range_m.0 - r, self.crust_range_m.1 + r)
+        let rise = self.valleys.as_ref().map_or(0.0, Valleys::max_rise_m);
+        (self.crust_range_m.0 - r, self.crust_range_m.1 + r + rise)
     }
 
     /// The query (triangle and weights) of unit direction `dir`.

@@ -145,12 +145,14 @@ pub struct Valleys {
 
 impl Valleys {
     /// The valleys of `drainage` (a network of the crust whose amplification `vertices` are),
-    /// on `mesh`.
+    /// on `mesh`; `seed` seeds the winding, and `relief_scale` (the amplifier's) scales the
+    /// incision and the walls with the primitives' relief.
     pub fn new(
         mesh: &SphereMesh,
         drainage: Network<'_>,
         vertices: &[AmplifyVertex],
         seed: u32,
+        relief_scale: f32,
     ) -> Self {
         let n = mesh.len();
         let spacing_km = mesh.mean_spacing_rad() * mesh.radius_km;
@@ -159,7 +161,10 @@ impl Valleys {
         let mut bed_m = vec![NO_BED; n];
         let mut floor_km = vec![0.0f32; n];
         let mut slope = vec![0.0f32; n];
-        let amp_m: Vec<f32> = vertices.iter().map(relief_amplitude_m).collect();
+        let amp_m: Vec<f32> = vertices
+            .iter()
+            .map(|v| relief_amplitude_m(v) * relief_scale)
+            .collect();
         let ok = drainage.receiver.len() == n
             && drainage.area_km2.len() == n
             && drainage.water_level_km.len() == n
@@ -172,7 +177,7 @@ impl Valleys {
             for &i in drainage.stack {
                 let i = i as usize;
                 let r = drainage.receiver[i] as usize;
-                let amp = f64::from(relief_amplitude_m(&vertices[i]));
+                let amp = f64::from(amp_m[i]);
                 let level = 1000.0 * f64::from(drainage.water_level_km[i]);
                 // A sample draining to no sea (to a closed basin's sink) keeps its level: cut
                 // below it, the valleys would deepen and widen the closed basin, all of it
@@ -253,6 +258,12 @@ impl Valleys {
             levels,
             radius_km: mesh.radius_km,
         }
+    }
+
+    /// How far a carved value can stand above the primitives' own value, metres (the cap on land
+    /// lies half an amplitude above the crust, with the primitives' crests on top).
+    pub fn max_rise_m(&self) -> f32 {
+        self.amp_m.iter().fold(0.0f32, |m, &a| m.max(a)) * CAP_AMPS as f32
     }
 
     /// `p` moved within the tangent plane by a smooth random field (at most about

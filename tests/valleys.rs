@@ -47,6 +47,19 @@ fn network(mesh: &SphereMesh, crust: &Crust) -> RiverNetwork {
     RiverNetwork::of(mesh, crust, NetworkOptions::of(&Params::default()))
 }
 
+/// The procedural amplifier of `crust` with `seed`, and the same with the valleys of `net`.
+fn amplifiers<'a>(
+    mesh: &'a SphereMesh,
+    crust: &Crust,
+    net: &RiverNetwork,
+    seed: u64,
+) -> (Amplifier<'a>, Amplifier<'a>) {
+    let plain = Amplifier::new(mesh, crust, seed, AmplifyOptions::default());
+    let carved = Amplifier::new(mesh, crust, seed, AmplifyOptions::default())
+        .with_valleys(net.valley_network());
+    (plain, carved)
+}
+
 /// The amplified elevation of a 100 m tile, row-major, with its width and height.
 fn tile(amp: &Amplifier, lat0: f64, lon0: f64, size_deg: f64) -> (Vec<f32>, usize, usize) {
     let px = parse_resolution("100m", RADIUS_KM).unwrap();
@@ -62,9 +75,7 @@ fn tile(amp: &Amplifier, lat0: f64, lon0: f64, size_deg: f64) -> (Vec<f32>, usiz
 fn amplified_tile_drains_to_few_closed_pits() {
     let (mesh, crust) = continent(500_000);
     let net = network(&mesh, &crust);
-    let plain = Amplifier::new(&mesh, &crust, 3, AmplifyOptions::default());
-    let carved = Amplifier::new(&mesh, &crust, 3, AmplifyOptions::default())
-        .with_valleys(net.valley_network());
+    let (plain, carved) = amplifiers(&mesh, &crust, &net, 3);
     // Two tiles: the range's flank, and the plains towards the coast.
     for (lat0, lon0) in [(4.0, 34.0), (-10.0, 47.0)] {
         let (z0, w, h) = tile(&plain, lat0, lon0, 0.5);
@@ -87,8 +98,7 @@ fn amplified_tile_drains_to_few_closed_pits() {
 fn coarse_rivers_run_in_valleys_whose_floors_fall_downstream() {
     let (mesh, crust) = continent(40_000);
     let net = network(&mesh, &crust);
-    let amp = Amplifier::new(&mesh, &crust, 3, AmplifyOptions::default())
-        .with_valleys(net.valley_network());
+    let (plain, amp) = amplifiers(&mesh, &crust, &net, 3);
     let d = &net.drainage;
     // The largest land reaches whose both ends are land.
     let mut reaches: Vec<usize> = (0..mesh.len())
@@ -130,7 +140,6 @@ fn coarse_rivers_run_in_valleys_whose_floors_fall_downstream() {
     );
     assert_eq!(rises, 0, "the floor rises downstream at {rises} points");
     // Seen to fail: the primitives alone put a coarse river in no valley.
-    let plain = Amplifier::new(&mesh, &crust, 3, AmplifyOptions::default());
     let i = reaches[0];
     let p = mesh.positions[i]
         .lerp(mesh.positions[d.receiver[i] as usize], 0.5)
@@ -142,8 +151,7 @@ fn coarse_rivers_run_in_valleys_whose_floors_fall_downstream() {
 fn carved_tiles_match_their_union_at_any_thread_count() {
     let (mesh, crust) = continent(20_000);
     let net = network(&mesh, &crust);
-    let amp = Amplifier::new(&mesh, &crust, 5, AmplifyOptions::default())
-        .with_valleys(net.valley_network());
+    let (plain, amp) = amplifiers(&mesh, &crust, &net, 5);
     let px = parse_resolution("100m", RADIUS_KM).unwrap();
     let a = GeoGrid::region(3.0, 33.0, 3.2, 33.2, px).unwrap();
     let b = GeoGrid {
@@ -183,7 +191,6 @@ fn carved_tiles_match_their_union_at_any_thread_count() {
         );
     }
     // The valleys are there: the carved tile differs from the primitives'.
-    let plain = Amplifier::new(&mesh, &crust, 5, AmplifyOptions::default());
     let zp = a.sample(&|d: DVec3| plain.elevation_m(d).to_bits());
     assert!(zp.iter().zip(&za).filter(|(x, y)| x != y).count() > za.len() / 2);
 }

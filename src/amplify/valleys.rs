@@ -50,12 +50,13 @@ const MAX_FLOOR_KM: f64 = 4.0;
 /// and its least value, metres.
 const INCISION_SHARE: f64 = 0.6;
 const MIN_INCISION_M: f64 = 10.0;
-/// Largest displacement of the valleys' warp, as a share of the first tributaries' spacing, and
-/// its wavelength, in the same unit.
+/// Scale of the valleys' warp (the displacement per unit of its noise vector), as a share of the
+/// first tributaries' spacing, and its wavelength, in the same unit.
 const WARP_SHARE: f64 = 0.15;
-/// Bound on the length of the warp's noise vector (three noise3 values, each within ±1.5).
-const WARP_MAX: f64 = 2.6;
 const WARP_WAVELENGTH_SHARE: f64 = 1.5;
+/// Bound on the length of the warp's noise vector (three noise3 values, each within ±1.5): the
+/// warp moves a point by at most `WARP_MAX · WARP_SHARE` (about 0.4) of that spacing.
+const WARP_MAX: f64 = 2.6;
 /// How much the primitives' relief steepens or flattens the valleys' walls: the walls' slope
 /// is multiplied by 1 + this × (relief / amplitude), within [`MOD_RANGE`].
 const MOD_GAIN: f64 = 0.6;
@@ -64,16 +65,15 @@ const MOD_RANGE: (f64, f64) = (0.6, 1.6);
 const CAP_AMPS: f64 = 0.5;
 /// A main valley's walls climb to the crust plus this many amplitudes at the end of their run.
 const WALL_RISE_AMPS: f64 = 0.8;
-/// ... over this share of the distance at which they start to be lifted out of the way (so
-/// they meet the cap well before: no trace of the lift shows).
+/// ... over this share of the distance at which they start to be blended into the cap (so they
+/// meet the cap well before: no trace of the blend shows).
 const WALL_RUN_SHARE: f64 = 0.75;
 /// Crust elevation over which the cap grows from nothing to its full height, metres.
 const CAP_RAMP_M: f64 = 100.0;
-/// Reach of a river's valley from its course, in mesh spacings (see the module documentation:
-/// at most what the corners' neighbours cover).
+/// Reach of a river's valley from its course, in mesh spacings.
 const REACH_SPACINGS: f64 = 0.6;
-/// Share of the reach over which a valley's surface is lifted out of the way, so that it ends
-/// without a step.
+/// Outer share of the reach over which a valley's surface is blended up to the cap, so that it
+/// ends without a step.
 const REACH_FADE_SHARE: f64 = 0.3;
 /// Gentlest and steepest wall of a main valley, m/m.
 const MIN_WALL_SLOPE: f64 = 0.01;
@@ -157,6 +157,7 @@ impl Valleys {
         let n = mesh.len();
         let spacing_km = mesh.mean_spacing_rad() * mesh.radius_km;
         let max_floor = MAX_FLOOR_KM.min(0.15 * spacing_km);
+        let reach_km = REACH_SPACINGS * spacing_km;
         let mut receiver = vec![u32::MAX; n];
         let mut bed_m = vec![NO_BED; n];
         let mut floor_km = vec![0.0f32; n];
@@ -194,7 +195,7 @@ impl Valleys {
                 } else {
                     f64::from(bed_m[r])
                 };
-                let bed = if below.is_nan() { raw } else { raw.max(below) };
+                let bed = raw.max(below);
                 bed_m[i] = bed as f32;
                 if r != i {
                     receiver[i] = r as u32;
@@ -204,13 +205,11 @@ impl Valleys {
                 // The main valley's walls climb from the bed to the primitives' crests over the
                 // reach: tributaries cut into them, the primitives' noise caps the divides.
                 let rise_m = level - bed + WALL_RISE_AMPS * amp;
-                let run_km =
-                    WALL_RUN_SHARE * REACH_SPACINGS * (1.0 - REACH_FADE_SHARE) * spacing_km;
+                let run_km = WALL_RUN_SHARE * (1.0 - REACH_FADE_SHARE) * reach_km;
                 slope[i] =
                     (rise_m / (1000.0 * run_km)).clamp(MIN_WALL_SLOPE, MAX_WALL_SLOPE) as f32;
             }
         }
-        let reach_km = REACH_SPACINGS * spacing_km;
         let levels = trib_levels(spacing_km);
         let cell = reach_km / mesh.radius_km;
         let frame = (0..n)
@@ -266,9 +265,9 @@ impl Valleys {
         self.amp_m.iter().fold(0.0f32, |m, &a| m.max(a)) * CAP_AMPS as f32
     }
 
-    /// `p` moved within the tangent plane by a smooth random field (at most about
-    /// [`WARP_SHARE`] of the first tributaries' spacing), so that valleys wind instead of
-    /// running straight; small enough against its wavelength that the warp folds nothing over.
+    /// `p` moved within the tangent plane by a smooth random field (at most about 0.4 of the
+    /// first tributaries' spacing, see [`WARP_MAX`]), so that valleys wind instead of running
+    /// straight; small enough against its wavelength that the warp folds nothing over.
     fn warp(&self, p: DVec3) -> DVec3 {
         let Some(first) = self.levels.first() else {
             return p;
@@ -316,8 +315,7 @@ impl Valleys {
         let p = self.warp(p0);
         // Nothing above the cap matters.
         let mut surface = cap;
-        let m = (1.0 + MOD_GAIN * f64::from(amplified - base) / amp_here)
-            .clamp(MOD_RANGE.0, MOD_RANGE.1);
+        let m = (1.0 + MOD_GAIN * relief / amp_here).clamp(MOD_RANGE.0, MOD_RANGE.1);
         let mut visit = |i: usize| {
             let r = self.receiver[i];
             if r == u32::MAX {
@@ -331,18 +329,19 @@ impl Valleys {
             let rel = (p - mesh.positions[i]) * self.radius_km;
             let (x, y) = (rel.dot(u), rel.dot(nrm));
             // Distance to the reach's course; beyond the reach it offers nothing, and over its
-            // outer part its surface is lifted out of the way (continuous, so no seam where a
+            // outer part its surface is blended up to the cap (continuous, so no seam where a
             // point stops seeing this reach).
             let xc = x.clamp(0.0, len);
             let d_main = ((x - xc) * (x - xc) + y * y).sqrt();
             if d_main >= self.reach_km {
                 return;
             }
-            let lift_from = (1.0 - REACH_FADE_SHARE) * self.reach_km;
-            let t = ((d_main - lift_from) / (self.reach_km - lift_from)).clamp(0.0, 1.0);
+            let blend_from = (1.0 - REACH_FADE_SHARE) * self.reach_km;
+            let t = ((d_main - blend_from) / (self.reach_km - blend_from)).clamp(0.0, 1.0);
             let bed_a = f64::from(self.bed_m[i]);
+            // An ocean receiver (no bed) is at sea level; `bed_a` was raised to it.
             let bed_b = match self.bed_m[r] {
-                b if b.is_nan() => bed_a.min(0.0),
+                b if b.is_nan() => 0.0,
                 b => f64::from(b),
             };
             let reach = Reach {
@@ -556,9 +555,9 @@ impl Reach<'_> {
         };
         let (spacing, max_len) = (lv.spacing_km, lv.max_len_km);
         let max_len = max_len.min(0.6 * len.max(spacing));
-        // A tributary carves within `rho` of its course and is lifted out of the way over the
-        // next `fade` (so that it ends without a step); every tributary lies within `max_len` of
-        // its parent.
+        // A tributary carves within `rho` of its course and is blended into its parent's wall
+        // over the next `fade` (so that it ends without a step); every tributary lies within
+        // `max_len` of its parent.
         let rho = lv.influence_km;
         let fade = 0.5 * rho;
         if d > max_len + rho + fade {

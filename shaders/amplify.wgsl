@@ -25,6 +25,10 @@ struct AmplifyUniform {
     seed: u32,
     relief_scale: f32,
     count: u32,
+    min_wavelength_km: f32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 };
 
 @group(0) @binding(0) var<uniform> params: AmplifyUniform;
@@ -165,13 +169,27 @@ fn noise3(seed: u32, x: f32, y: f32, z: f32) -> f32 {
     return mix1(mix1(x00, x10, v), mix1(x01, x11, v), w);
 }
 
-fn fbm2(seed: u32, x: f32, y: f32, octaves: u32, gain: f32) -> f32 {
+// How many of `octaves` octaves (wavelengths wl_km, wl_km / 2, ...) are at least the
+// shortest wavelength evaluated.
+fn kept_octaves(wl_km: f32, octaves: u32) -> u32 {
+    var o = 0u;
+    var w = wl_km;
+    while (o < octaves && w >= params.min_wavelength_km) {
+        o = o + 1u;
+        w = w * 0.5;
+    }
+    return o;
+}
+
+fn fbm2(seed: u32, x: f32, y: f32, octaves: u32, kept: u32, gain: f32) -> f32 {
     var sum = 0.0;
     var norm = 0.0;
     var amp = 1.0;
     var freq = 1.0;
     for (var o = 0u; o < octaves; o = o + 1u) {
-        sum = sum + amp * noise2(seed + o * 0x9e3779b9u, x * freq, y * freq);
+        if (o < kept) {
+            sum = sum + amp * noise2(seed + o * 0x9e3779b9u, x * freq, y * freq);
+        }
         norm = norm + amp;
         amp = amp * gain;
         freq = freq * 2.0;
@@ -212,11 +230,12 @@ fn vertex_relief(v: AmplifyVertex, p: vec3<f32>) -> vec2<f32> {
         // Abyssal hills parallel to the ridge (x: ridge axis, y: spreading direction); each
         // segment offset across the ridge.
         let hills = fbm2(seed, x / (OCEAN_HILL_WAVELENGTH_KM * OCEAN_HILL_STRETCH),
-            (y + shift) / OCEAN_HILL_WAVELENGTH_KM, 3u, 0.5);
+            (y + shift) / OCEAN_HILL_WAVELENGTH_KM, 3u, kept_octaves(OCEAN_HILL_WAVELENGTH_KM, 3u), 0.5);
         let relief = young * (OCEAN_HILL_AMP_M * 1.4 * hills - FAULT_DEPTH_M * (trough - trough_mean));
         return vec2<f32>(relief, OCEAN_DETAIL_M);
     } else if (v.kind == KIND_PLAIN) {
-        let n = fbm2(seed ^ 0x1b873593u, x / PLAIN_WAVELENGTH_KM, y / PLAIN_WAVELENGTH_KM, 4u, 0.5);
+        let n = fbm2(seed ^ 0x1b873593u, x / PLAIN_WAVELENGTH_KM, y / PLAIN_WAVELENGTH_KM, 4u,
+            kept_octaves(PLAIN_WAVELENGTH_KM, 4u), 0.5);
         return vec2<f32>(PLAIN_AMP_M * 1.4 * n, PLAIN_DETAIL_M);
     }
     let him = v.kind == KIND_HIMALAYAN;
@@ -243,11 +262,14 @@ fn vertex_relief(v: AmplifyVertex, p: vec3<f32>) -> vec2<f32> {
     var norm = 0.0;
     var oamp = 1.0;
     var freq = 1.0;
+    let kept = kept_octaves(wl, 4u);
     for (var o = 0u; o < 4u; o = o + 1u) {
-        let n = noise2(mseed + o * 0x9e3779b9u, gx * freq, gy * freq);
-        let r = 1.0 - abs(n) * 1.4;
-        ridges = ridges + oamp * (r * r - RIDGE_MEAN);
-        rounded = rounded + oamp * n;
+        if (o < kept) {
+            let n = noise2(mseed + o * 0x9e3779b9u, gx * freq, gy * freq);
+            let r = 1.0 - abs(n) * 1.4;
+            ridges = ridges + oamp * (r * r - RIDGE_MEAN);
+            rounded = rounded + oamp * n;
+        }
         norm = norm + oamp;
         oamp = oamp * gain;
         freq = freq * 2.0;
@@ -262,7 +284,16 @@ fn detail(p: vec3<f32>) -> f32 {
     let x = p.x * f;
     let y = p.y * f;
     let z = p.z * f;
-    let n = noise3(s, x, y, z) + 0.5 * noise3(s + 1u, 2.5 * x, 2.5 * y, 2.5 * z);
+    // Each octave only where the output resolves it.
+    var n0 = 0.0;
+    var n1 = 0.0;
+    if (DETAIL_WAVELENGTH_KM >= params.min_wavelength_km) {
+        n0 = noise3(s, x, y, z);
+    }
+    if (DETAIL_WAVELENGTH_KM / 2.5 >= params.min_wavelength_km) {
+        n1 = noise3(s + 1u, 2.5 * x, 2.5 * y, 2.5 * z);
+    }
+    let n = n0 + 0.5 * n1;
     return n / 1.5;
 }
 

@@ -234,7 +234,11 @@ fn hundred_metre_tile_averaged_down_matches_the_global_map() {
         dy_deg: global.dy_deg / k as f64,
         ..global
     };
-    let (mut diffs, mut relief) = (Vec::new(), Vec::new());
+    // The same, leaving out the detail the global map's pixels cannot resolve.
+    let pixel_km = global.dy_deg.to_radians() * RADIUS_KM;
+    let filtered =
+        Amplifier::new(&mesh, &crust, 2, AmplifyOptions::default()).with_pixel_km(pixel_km);
+    let (mut diffs, mut relief, mut diffs_filtered) = (Vec::new(), Vec::new(), Vec::new());
     // Global pixels over the range, the plains and the ocean.
     for (lat, lon) in [
         (5.0, 30.0),
@@ -266,6 +270,7 @@ fn hundred_metre_tile_averaged_down_matches_the_global_map() {
             let z = tile.sample(&|d| amp.elevation_m(d));
             let mean = z.iter().map(|&v| f64::from(v)).sum::<f64>() / z.len() as f64;
             diffs.push(mean - z_global);
+            diffs_filtered.push(mean - f64::from(filtered.elevation_m(d)));
             relief.push(z_global - f64::from(amp.crust_elevation_m(d)));
         }
     }
@@ -284,6 +289,47 @@ fn hundred_metre_tile_averaged_down_matches_the_global_map() {
         "rms {rms_diff} vs relief {rms_relief}"
     );
     assert!(mean.abs() < 40.0, "bias {mean}");
+    // Without the octaves finer than a pixel (which average away over it), a pixel's value
+    // lies no farther from the average of the relief over it. Seen to fail with the cut at two
+    // pixels (69.5 m against 66.9 m): a pixel's average keeps part of those octaves.
+    let rms_filtered = rms(&diffs_filtered);
+    println!("filtered: rms {rms_filtered:.1} m");
+    assert!(
+        rms_filtered < 1.02 * rms_diff,
+        "filtered rms {rms_filtered} vs {rms_diff}"
+    );
+}
+
+/// The detail an output cannot resolve is left out only where it cannot be resolved: at 100 m
+/// pixels nothing changes (the same bits), at 5 km the finer octaves go.
+#[test]
+fn pixel_size_leaves_out_only_unresolved_octaves() {
+    let (mesh, crust) = synthetic(20_000, false, 10.0);
+    let full = Amplifier::new(&mesh, &crust, 2, AmplifyOptions::default());
+    let fine = Amplifier::new(&mesh, &crust, 2, AmplifyOptions::default()).with_pixel_km(0.1);
+    let coarse = Amplifier::new(&mesh, &crust, 2, AmplifyOptions::default()).with_pixel_km(5.0);
+    let mut rng = SimRng::new(11, 1);
+    let (mut same, mut changed, n) = (0, 0, 2000);
+    for _ in 0..n {
+        let d = DVec3::new(
+            rng.next_f64() - 0.5,
+            rng.next_f64() - 0.5,
+            rng.next_f64() - 0.5,
+        )
+        .normalize();
+        let z = full.elevation_m(d);
+        same += usize::from(fine.elevation_m(d).to_bits() == z.to_bits());
+        changed += usize::from((coarse.elevation_m(d) - z).abs() > 0.5);
+    }
+    assert_eq!(same, n, "100 m pixels changed {} values", n - same);
+    assert!(changed > n / 2, "5 km pixels changed only {changed} of {n}");
+    // The range keeps its coarse relief: its amplitude drops, but not to nothing.
+    let centre = from_lat_lon_deg(0.0, 30.0);
+    let (s_full, s_coarse) = (std_relief(&full, centre), std_relief(&coarse, centre));
+    assert!(
+        s_coarse < s_full && s_coarse > 0.3 * s_full,
+        "relief std {s_coarse} m at 5 km pixels, {s_full} m in full"
+    );
 }
 
 /// The stored fold direction is the direction of compression (paper §4.1), so a range's axis
@@ -646,6 +692,32 @@ fn amplify_kernel_matches_cpu_reference() {
         .filter(|(a, b)| (*a - *b).abs() > 5.0)
         .count();
     assert!(moved > queries.len() / 2, "only {moved} points have relief");
+    // Leaving out the octaves an output's pixels cannot resolve (a random shortest
+    // wavelength, 0.5 to 20 km): the same on both sides, and really applied.
+    let coarse = AmplifyUniform {
+        min_wavelength_km: (0.5 + rng.next_f64() * 19.5) as f32,
+        ..u
+    };
+    let mut cpu_coarse = vec![f32::NAN; queries.len()];
+    amplify_cpu(&coarse, &amp.vertices, &queries, &mut cpu_coarse);
+    let gpu_coarse = amplify_gpu(&mut ctx, &amp.vertices, &queries, &coarse).unwrap();
+    for (i, (&g, &c)) in gpu_coarse.iter().zip(&cpu_coarse).enumerate() {
+        assert!(
+            (g - c).abs() <= AMPLIFY_TOLERANCE_M,
+            "coarse (shortest wavelength {} km): query {i}: gpu {g} m, cpu {c} m (seed {seed})",
+            coarse.min_wavelength_km
+        );
+    }
+    let filtered = cpu_coarse
+        .iter()
+        .zip(&cpu)
+        .filter(|(a, b)| (*a - *b).abs() > 0.5)
+        .count();
+    assert!(
+        filtered > queries.len() / 4,
+        "only {filtered} values changed at {} km",
+        coarse.min_wavelength_km
+    );
     // Empty inputs.
     assert!(
         amplify_gpu(&mut ctx, &amp.vertices, &[], &u)

@@ -194,3 +194,38 @@ fn carved_tiles_match_their_union_at_any_thread_count() {
     let zp = a.sample(&|d: DVec3| plain.elevation_m(d).to_bits());
     assert!(zp.iter().zip(&za).filter(|(x, y)| x != y).count() > za.len() / 2);
 }
+
+/// An output whose pixels cannot resolve a tributary level leaves it out (a global map of 5 km
+/// pixels carves the main valleys only), and still carves.
+#[test]
+fn coarse_outputs_carve_only_the_tributaries_they_resolve() {
+    let (mesh, crust) = continent(20_000);
+    let net = network(&mesh, &crust);
+    let levels = |px: f64| {
+        let (_, amp) = amplifiers(&mesh, &crust, &net, 5);
+        let amp = amp.with_pixel_km(px);
+        amp.valleys.as_ref().unwrap().detail_levels()
+    };
+    let all = levels(0.1);
+    assert!(all >= 2, "{all} tributary levels at 100 m");
+    let counts: Vec<usize> = [0.1, 1.0, 3.0, 10.0, 30.0, 1000.0]
+        .iter()
+        .map(|&px| levels(px))
+        .collect();
+    assert!(counts.windows(2).all(|w| w[0] >= w[1]), "{counts:?}");
+    assert!(counts[1..].iter().any(|&c| 0 < c && c < all), "{counts:?}");
+    assert_eq!(*counts.last().unwrap(), 0, "{counts:?}");
+    // Without tributaries the main valleys are still carved.
+    let (plain, amp) = amplifiers(&mesh, &crust, &net, 5);
+    let amp = amp.with_pixel_km(1000.0);
+    let px = parse_resolution("2km", RADIUS_KM).unwrap();
+    let g = GeoGrid::region(0.0, 30.0, 6.0, 36.0, px).unwrap();
+    let zc = g.sample(&|d: DVec3| amp.elevation_m(d));
+    let zp = g.sample(&|d: DVec3| plain.elevation_m(d));
+    let lower = zc.iter().zip(&zp).filter(|(c, p)| c < p).count();
+    assert!(
+        lower > zc.len() / 10,
+        "{lower} of {} pixels carved",
+        zc.len()
+    );
+}

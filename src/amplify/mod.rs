@@ -41,6 +41,12 @@ impl Default for AmplifyOptions {
     }
 }
 
+/// Noise octaves shorter than this many output pixels are left out (see
+/// [`Amplifier::with_pixel_km`]). One pixel: a pixel's average keeps a fair share of a
+/// wavelength of two pixels, so cutting there would move values away from the average
+/// (tests/amplify.rs, `hundred_metre_tile_averaged_down_matches_the_global_map`).
+pub const NOISE_LOD_PIXELS: f64 = 1.0;
+
 /// 32 noise-seed bits from a 64-bit planet seed.
 pub fn noise_seed(seed: u64) -> u32 {
     let h = mix64(seed ^ 0x616d_706c_6966_7921);
@@ -173,6 +179,8 @@ impl<'a> Amplifier<'a> {
                 seed: noise_seed(seed),
                 relief_scale: options.relief_scale,
                 count: 0,
+                min_wavelength_km: 0.0,
+                pad: [0; 3],
             },
             exemplars: None,
             crust_range_m,
@@ -198,6 +206,19 @@ impl<'a> Amplifier<'a> {
             self.uniform.seed,
             self.uniform.relief_scale,
         ));
+        self
+    }
+
+    /// Leaves out the detail an output of `pixel_km` pixels cannot resolve: noise octaves whose
+    /// wavelength is under [`NOISE_LOD_PIXELS`] pixel (averaged over a pixel, they vanish) and
+    /// tributary levels whose junctions lie under [`valleys::LOD_PIXELS`] pixels apart (see
+    /// [`Valleys::set_pixel_km`]; sampled, they alias into a maze). Nothing changes at 100 m
+    /// pixels or finer. Call it after [`Self::with_valleys`].
+    pub fn with_pixel_km(mut self, pixel_km: f64) -> Self {
+        self.uniform.min_wavelength_km = (NOISE_LOD_PIXELS * pixel_km) as f32;
+        if let Some(v) = self.valleys.as_mut() {
+            v.set_pixel_km(pixel_km);
+        }
         self
     }
 

@@ -199,25 +199,41 @@ pub fn noise3(seed: u32, x: f32, y: f32, z: f32) -> f32 {
 }
 
 /// Fractal sum of `noise2` (lacunarity 2), normalised by the sum of the octave weights.
-fn fbm2(seed: u32, x: f32, y: f32, octaves: u32, gain: f32) -> f32 {
+/// Only the first `kept` octaves are summed (the others count in the normalisation: left out,
+/// their zero-mean detail is filtered away, see [`kept_octaves`]).
+fn fbm2(seed: u32, x: f32, y: f32, octaves: u32, kept: u32, gain: f32) -> f32 {
     let mut sum = 0.0;
     let mut norm = 0.0;
     let mut amp = 1.0;
     let mut freq = 1.0;
     let mut o = 0;
     while o < octaves {
-        sum += amp
-            * noise2(
-                seed.wrapping_add(o.wrapping_mul(0x9e37_79b9)),
-                x * freq,
-                y * freq,
-            );
+        if o < kept {
+            sum += amp
+                * noise2(
+                    seed.wrapping_add(o.wrapping_mul(0x9e37_79b9)),
+                    x * freq,
+                    y * freq,
+                );
+        }
         norm += amp;
         amp *= gain;
         freq *= 2.0;
         o += 1;
     }
     sum / norm
+}
+
+/// How many of `octaves` octaves of a noise (wavelengths `wl_km`, `wl_km` / 2, ...) are at
+/// least the uniform's shortest wavelength: the ones an output resolves (all at 100 m pixels;
+/// on a global map of 5 km pixels the finer ones would only alias).
+fn kept_octaves(u: &AmplifyUniform, wl_km: f32, octaves: u32) -> u32 {
+    let (mut o, mut w) = (0, wl_km);
+    while o < octaves && w >= u.min_wavelength_km {
+        o += 1;
+        w *= 0.5;
+    }
+    o
 }
 
 /// The relief of one vertex's primitive at unit direction `p` (metres), and the amplitude of
@@ -269,6 +285,7 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
             ridge_axis / (OCEAN_HILL_WAVELENGTH_KM * OCEAN_HILL_STRETCH),
             (spreading_dir + shift) / OCEAN_HILL_WAVELENGTH_KM,
             3,
+            kept_octaves(u, OCEAN_HILL_WAVELENGTH_KM, 3),
             0.5,
         );
         let relief =
@@ -280,6 +297,7 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
             x / PLAIN_WAVELENGTH_KM,
             y / PLAIN_WAVELENGTH_KM,
             4,
+            kept_octaves(u, PLAIN_WAVELENGTH_KM, 4),
             0.5,
         );
         (PLAIN_AMP_M * 1.4 * n, PLAIN_DETAIL_M)
@@ -308,15 +326,18 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
         // One noise per octave feeds both the ridged (young) and the rounded (old) relief.
         let (mut ridges, mut rounded, mut norm, mut oamp, mut freq) = (0.0, 0.0, 0.0, 1.0, 1.0);
         let mut o = 0u32;
+        let kept = kept_octaves(u, wl, 4);
         while o < 4 {
-            let n = noise2(
-                mseed.wrapping_add(o.wrapping_mul(0x9e37_79b9)),
-                gx * freq,
-                gy * freq,
-            );
-            let r = 1.0 - n.abs() * 1.4;
-            ridges += oamp * (r * r - RIDGE_MEAN);
-            rounded += oamp * n;
+            if o < kept {
+                let n = noise2(
+                    mseed.wrapping_add(o.wrapping_mul(0x9e37_79b9)),
+                    gx * freq,
+                    gy * freq,
+                );
+                let r = 1.0 - n.abs() * 1.4;
+                ridges += oamp * (r * r - RIDGE_MEAN);
+                rounded += oamp * n;
+            }
             norm += oamp;
             oamp *= gain;
             freq *= 2.0;
@@ -350,7 +371,18 @@ fn detail(u: &AmplifyUniform, p: [f32; 3]) -> f32 {
     let f = u.radius_km / DETAIL_WAVELENGTH_KM;
     let s = u.seed ^ 0xe654_6b64;
     let (x, y, z) = (p[0] * f, p[1] * f, p[2] * f);
-    let n = noise3(s, x, y, z) + 0.5 * noise3(s.wrapping_add(1), 2.5 * x, 2.5 * y, 2.5 * z);
+    // Each octave only where the output resolves it.
+    let n0 = if DETAIL_WAVELENGTH_KM >= u.min_wavelength_km {
+        noise3(s, x, y, z)
+    } else {
+        0.0
+    };
+    let n1 = if DETAIL_WAVELENGTH_KM / 2.5 >= u.min_wavelength_km {
+        noise3(s.wrapping_add(1), 2.5 * x, 2.5 * y, 2.5 * z)
+    } else {
+        0.0
+    };
+    let n = n0 + 0.5 * n1;
     n / 1.5
 }
 

@@ -36,7 +36,7 @@
 use glam::DVec3;
 
 use crate::geometry::SphereMesh;
-use crate::random::hash3;
+use crate::random::mix64;
 
 use super::procedural::{AmplifyQuery, AmplifyVertex, noise3, relief_amplitude_m};
 
@@ -136,6 +136,8 @@ pub struct Valleys {
     radius_km: f64,
     /// Tributary levels (see [`trib_levels`]).
     levels: Vec<TribLevel>,
+    /// How many of them are carved (the coarsest first; see [`Valleys::set_pixel_km`]).
+    detail: usize,
     /// Noise seed of the warp.
     seed: u32,
     /// How far the tributaries of all levels reach from their reach, km (their longest runs
@@ -253,10 +255,32 @@ impl Valleys {
             frame,
             reach_km,
             trib_reach_km: levels.iter().map(|l| l.max_len_km).sum(),
+            detail: levels.len(),
             seed,
             levels,
             radius_km: mesh.radius_km,
         }
+    }
+
+    /// Carves only the tributary levels that an output of `pixel_km` pixels resolves: those
+    /// whose junctions lie at least [`LOD_PIXELS`] pixels apart (all of them at 100 m; only the
+    /// main valleys on a global map of 5 km pixels, where the tributaries would alias into a
+    /// maze). The value at a point then depends on the pixel size, never on the tiling.
+    pub fn set_pixel_km(&mut self, pixel_km: f64) {
+        self.detail = self
+            .levels
+            .iter()
+            .take_while(|l| l.spacing_km >= LOD_PIXELS * pixel_km)
+            .count();
+        self.trib_reach_km = self.levels[..self.detail]
+            .iter()
+            .map(|l| l.max_len_km)
+            .sum();
+    }
+
+    /// Tributary levels carved (see [`Self::set_pixel_km`]).
+    pub fn detail_levels(&self) -> usize {
+        self.detail
     }
 
     /// How far a carved value can stand above the primitives' own value, metres (the cap on land
@@ -312,7 +336,9 @@ impl Valleys {
             Ok(c) => &self.reaches[self.starts[c] as usize..self.starts[c + 1] as usize],
             Err(_) => return cap as f32, // no reach comes this close
         };
-        let p = self.warp(p0);
+        // The warp moves the valleys by less than the tributaries' spacing: without them (an
+        // output too coarse to show them), it would not show either.
+        let p = if self.detail == 0 { p0 } else { self.warp(p0) };
         // Nothing above the cap matters.
         let mut surface = cap;
         let m = (1.0 + MOD_GAIN * relief / amp_here).clamp(MOD_RANGE.0, MOD_RANGE.1);
@@ -348,7 +374,7 @@ impl Valleys {
                 slope_m_per_km: 1000.0 * f64::from(self.slope[i]),
                 floor_km: f64::from(self.floor_km[i]),
                 key: i as u64,
-                levels: &self.levels,
+                levels: &self.levels[..self.detail],
             };
             let seg = Seg {
                 a: (0.0, 0.0),
@@ -478,6 +504,9 @@ struct TribLevel {
     influence_km: f64,
 }
 
+/// A tributary level is carved only where its junctions lie this many output pixels apart.
+pub const LOD_PIXELS: f64 = 2.0;
+
 /// Most tributary levels below a reach.
 const MAX_LEVELS: usize = 4;
 /// The first level on a mesh of 500,000 samples (32 km spacing): junctions every 5 km,
@@ -524,6 +553,11 @@ const TRIB_STEEPER: f64 = 1.3;
 const MAX_TRIB_SLOPE_M_PER_KM: f64 = 800.0;
 /// Half-width of a tributary's floor, km.
 const TRIB_FLOOR_KM: f64 = 0.08;
+/// The stream constant of `crate::random::hash3` (the tributaries' bits are its values).
+const GOLDEN: u64 = 0x9e37_79b9_7f4a_7c15;
+/// Slack of the lower bounds that skip tributaries, metres: a bound this close to what a point
+/// has is not trusted to the last rounding.
+const BOUND_MARGIN_M: f64 = 1e-6;
 
 impl Reach<'_> {
     /// The lowest valley surface of `seg` and its tributaries (to the last level) at `p`,
@@ -563,77 +597,103 @@ impl Reach<'_> {
         if d > max_len + rho + fade {
             return best;
         }
-        // A tributary runs upstream from its junction at 45–80° to its parent: it can come
-        // within `rho + fade` of p only if its junction lies within that of p's position along
-        // the parent, or at most its run (`max_len`·cos 45°) downstream of it; and one on the
-        // other side of the parent only if p is that close to the parent.
         let reach = rho + fade;
-        let k0 = (((along - reach) / spacing).floor() as i64 - 1).max(0);
-        let k1 = (((along + reach + std::f64::consts::FRAC_1_SQRT_2 * max_len) / spacing).ceil()
-            as i64)
-            .min((len / spacing) as i64);
         let across = (p.1 - seg.a.1) * ux - (p.0 - seg.a.0) * uy;
-        let sides: &[f64] = match (across >= 0.0, across.abs() < reach) {
-            (_, true) => &[-1.0, 1.0],
-            (true, false) => &[1.0],
-            (false, false) => &[-1.0],
-        };
-        for (side, k) in sides
-            .iter()
-            .flat_map(|&side| (k0..=k1).map(move |k| (side, k)))
-        {
-            let kk = k as u64;
-            // One hash, three 21-bit uniforms: the junction's jitter, the angle, the length.
-            let bits = hash3(
-                self.key,
-                0x7661_6c6c + level as u64,
-                kk << 1 | u64::from(side > 0.0),
-            );
-            let h = |n: u64| ((bits >> (21 * n)) & 0x1f_ffff) as f64 / (1u64 << 21) as f64;
-            let xk = (kk as f64 + 0.5 + 0.6 * (h(0) - 0.5)) * spacing;
-            if !(0.0..=len).contains(&xk) {
+        // What every tributary of this level shares: the hash of the reach and level, the
+        // tributaries' wall slope, how far their own tributaries run.
+        let key = mix64(self.key ^ mix64((0x7661_6c6c + level as u64).wrapping_add(GOLDEN)));
+        let steeper = (slope * TRIB_STEEPER)
+            .min(MAX_TRIB_SLOPE_M_PER_KM)
+            .max(slope);
+        let below: f64 = self.levels[level + 1..].iter().map(|l| l.max_len_km).sum();
+        let last_k = (len / spacing) as i64;
+        for side in [-1.0f64, 1.0] {
+            // `p`'s distance out from the parent on this side (negative: on the other side).
+            let out_side = side * across;
+            if out_side <= -reach {
+                continue; // every tributary of this side lies beyond the parent
+            }
+            // A tributary's bed climbs across the parent's wall at TRIB_BED_SHARE of its slope
+            // (and its own tributaries' beds from there), and its walls are steeper than that:
+            // nothing on this side comes below the parent's lowest bed plus that climb to `p`.
+            let climb = TRIB_BED_SHARE * slope * (out_side - below - TRIB_FLOOR_KM).max(0.0);
+            if seg.bed_a.min(seg.bed_b) + climb + BOUND_MARGIN_M >= best.min(ub) {
                 continue;
             }
-            // The angle to the parent, 45–80° (its tangent 1–5.7), without trigonometry.
-            let tan = 1.0 + 4.7 * h(1);
-            let (cos, sin) = (
-                1.0 / (1.0 + tan * tan).sqrt(),
-                tan / (1.0 + tan * tan).sqrt(),
-            );
-            let l = max_len * (0.5 + 0.5 * h(2));
-            // The junction on the parent, and the tributary's head upstream of it, on its side.
-            let (jx, jy) = (seg.a.0 + ux * xk, seg.a.1 + uy * xk);
-            let (tx, ty) = (-cos * l, side * sin * l);
-            let head = (jx + ux * tx - uy * ty, jy + uy * tx + ux * ty);
-            let bed_j = seg.bed_a + (seg.bed_b - seg.bed_a) * (xk / len);
-            // The head lies l·sin θ out on the parent's wall: its bed climbs part of that rise.
-            let trib = Seg {
-                a: head,
-                b: (jx, jy),
-                bed_a: bed_j + TRIB_BED_SHARE * slope * l * sin,
-                bed_b: bed_j,
+            // A tributary runs upstream from its junction at 45–80° to its parent: within
+            // `reach` of `p` only if its junction is no more than `reach` upstream of `p`'s
+            // position along the parent, nor more than its run (`max_len`·cos 45°) downstream;
+            // and within `reach` of the line through it at its angle: `p`'s position plus
+            // out·cot θ (cot θ within 0.18–1), give or take reach / sin θ (at most √2·reach).
+            let slack = std::f64::consts::SQRT_2 * reach;
+            let (cot_lo, cot_hi) = if out_side >= 0.0 {
+                (0.17, 1.0)
+            } else {
+                (1.0, 0.17)
             };
-            let dt2 = seg_distance2(&trib, p);
-            if dt2 >= reach * reach {
-                continue;
+            let lo = (along - reach).max(along + cot_lo * out_side - slack);
+            let hi = (along + reach + std::f64::consts::FRAC_1_SQRT_2 * max_len)
+                .min(along + cot_hi * out_side + slack);
+            // Junction k lies within [k + 0.2, k + 0.8] spacings (a little slack either way).
+            let k0 = ((lo / spacing - 0.8).floor() as i64).max(0);
+            let k1 = ((hi / spacing - 0.2).ceil() as i64).min(last_k);
+            for k in k0..=k1 {
+                let kk = k as u64;
+                // One hash, three 21-bit uniforms: the junction's jitter, the angle, the length.
+                let bits = mix64(key.wrapping_add(kk << 1 | u64::from(side > 0.0)));
+                let h = |n: u64| ((bits >> (21 * n)) & 0x1f_ffff) as f64 / (1u64 << 21) as f64;
+                let xk = (kk as f64 + 0.5 + 0.6 * (h(0) - 0.5)) * spacing;
+                if !(0.0..=len).contains(&xk) {
+                    continue;
+                }
+                let l = max_len * (0.5 + 0.5 * h(2));
+                let (jx, jy) = (seg.a.0 + ux * xk, seg.a.1 + uy * xk);
+                // The whole tributary lies within `l` of its junction.
+                let (ex, ey) = (p.0 - jx, p.1 - jy);
+                let far = l + reach + 1e-6;
+                if ex * ex + ey * ey > far * far {
+                    continue;
+                }
+                let bed_j = seg.bed_a + (seg.bed_b - seg.bed_a) * (xk / len);
+                if bed_j + climb + BOUND_MARGIN_M >= best.min(ub) {
+                    continue;
+                }
+                // The angle to the parent, 45–80° (its tangent 1–5.7), without trigonometry.
+                let tan = 1.0 + 4.7 * h(1);
+                let (cos, sin) = (
+                    1.0 / (1.0 + tan * tan).sqrt(),
+                    tan / (1.0 + tan * tan).sqrt(),
+                );
+                // The tributary's head, upstream of the junction on its side.
+                let (tx, ty) = (-cos * l, side * sin * l);
+                let head = (jx + ux * tx - uy * ty, jy + uy * tx + ux * ty);
+                // The head lies l·sin θ out on the parent's wall: its bed climbs part of that
+                // rise.
+                let trib = Seg {
+                    a: head,
+                    b: (jx, jy),
+                    bed_a: bed_j + TRIB_BED_SHARE * slope * l * sin,
+                    bed_b: bed_j,
+                };
+                let dt2 = seg_distance2(&trib, p);
+                if dt2 >= reach * reach {
+                    continue;
+                }
+                let dt = dt2.sqrt();
+                // Over the outer part of its reach, blended up to its parent's own surface: at
+                // the edge it is nowhere below its parent, so leaving it out there changes
+                // nothing.
+                let x = ((dt - rho) / fade).clamp(0.0, 1.0);
+                // Nothing in the tributary's tree comes below its junction's bed plus the wall
+                // climbed from the nearest its own tributaries reach: skip it if that is no
+                // lower than what is there (the same bits: the minimum would not change).
+                let bound = best.min(ub);
+                if bed_j + steeper * m * (dt - below - TRIB_FLOOR_KM).max(0.0) >= bound {
+                    continue;
+                }
+                let sub = self.surface(&trib, p, level + 1, steeper, m, bound);
+                best = best.min(sub + x * x * (own - sub).max(0.0));
             }
-            let dt = dt2.sqrt();
-            // Over the outer part of its reach, blended up to its parent's own surface: at the
-            // edge it is nowhere below its parent, so leaving it out there changes nothing.
-            let x = ((dt - rho) / fade).clamp(0.0, 1.0);
-            let steeper = (slope * TRIB_STEEPER)
-                .min(MAX_TRIB_SLOPE_M_PER_KM)
-                .max(slope);
-            // Nothing in the tributary's tree comes below its junction's bed plus the wall
-            // climbed from the nearest its own tributaries reach: skip it if that is no lower
-            // than what is there (the same bits: the minimum would not change).
-            let bound = best.min(ub);
-            let below: f64 = self.levels[level + 1..].iter().map(|l| l.max_len_km).sum();
-            if bed_j + steeper * m * (dt - below - TRIB_FLOOR_KM).max(0.0) >= bound {
-                continue;
-            }
-            let sub = self.surface(&trib, p, level + 1, steeper, m, bound);
-            best = best.min(sub + x * x * (own - sub).max(0.0));
         }
         best
     }

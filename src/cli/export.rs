@@ -344,6 +344,8 @@ pub(crate) fn write_extra_exports_on(
             .unwrap_or_else(|| RiverNetwork::of(mesh, &view, network_opts));
         amp = amp.with_valleys(rivers.valley_network());
     }
+    // Only the detail the output's pixels resolve (its north-south pixel size).
+    amp = amp.with_pixel_km(grid.dy_deg.to_radians() * radius_km);
     say("amplification tables", t);
     if e.amplified {
         let t = Instant::now();

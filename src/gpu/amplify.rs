@@ -83,6 +83,11 @@ pub struct AmplifyUniform {
     pub relief_scale: f32,
     /// Number of queries (the shader's bound check).
     pub count: u32,
+    /// Shortest noise wavelength evaluated, km: finer octaves are left out (an output's pixels
+    /// cannot resolve them; see `Amplifier::with_pixel_km`). 0 keeps every octave.
+    pub min_wavelength_km: f32,
+    /// Padding to 32 bytes (a uniform buffer's struct is read in 16-byte rows).
+    pub pad: [u32; 3],
 }
 
 /// Threads per workgroup of the kernel (`@workgroup_size` in shaders/amplify.wgsl).

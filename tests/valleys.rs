@@ -229,3 +229,46 @@ fn coarse_outputs_carve_only_the_tributaries_they_resolve() {
         zc.len()
     );
 }
+
+/// The exports carve blocks of pixels together (`Amplifier::carve_band`): the same bits as
+/// pixel by pixel, whatever the block size.
+#[test]
+fn carving_by_blocks_gives_the_bits_of_carving_pixel_by_pixel() {
+    // The default planet's resolution: tributaries every 5 and 1.5 km, so that a block of 8 to
+    // 150 pixels spans several of them.
+    let (mesh, crust) = continent(500_000);
+    let net = network(&mesh, &crust);
+    let (_, amp) = amplifiers(&mesh, &crust, &net, 5);
+    let px = parse_resolution("100m", RADIUS_KM).unwrap();
+    let g = GeoGrid::region(3.0, 33.0, 3.15, 33.12, px).unwrap();
+    let (w, h) = (g.width as usize, g.height as usize);
+    let queries: Vec<_> = (0..h)
+        .flat_map(|r| (0..w).map(move |c| (c, r)))
+        .map(|(c, r)| amp.query(g.direction(c as u32, r as u32)))
+        .collect();
+    let single: Vec<u32> = queries
+        .iter()
+        .map(|q| amp.elevation_of(q).to_bits())
+        .collect();
+    let primitives: Vec<f32> = queries.iter().map(|q| amp.primitives_of(q)).collect();
+    let carved = single
+        .iter()
+        .zip(&primitives)
+        .filter(|(s, p)| **s != p.to_bits())
+        .count();
+    assert!(
+        carved > single.len() / 2,
+        "{carved} of {} carved",
+        single.len()
+    );
+    for block in [1, 3, 8, 16, 40, 1000] {
+        let mut z = primitives.clone();
+        amp.carve_band(&queries, &mut z, w, block);
+        let differ = z
+            .iter()
+            .zip(&single)
+            .filter(|(a, b)| a.to_bits() != **b)
+            .count();
+        assert_eq!(differ, 0, "block {block}: {differ} pixels differ");
+    }
+}

@@ -289,6 +289,45 @@ impl<'a> Amplifier<'a> {
         }
     }
 
+    /// [`Self::carve`] over a band of rows `width` pixels wide (`queries` and `z` row-major,
+    /// whole rows), in parallel, by blocks of `block` × `block` pixels that share the search
+    /// for the valleys near them: the same bits as [`Self::carve`] pixel by pixel, whatever the
+    /// block size (blocks about a kilometre wide are the fastest; see docs/amplification.md).
+    pub fn carve_band(&self, queries: &[AmplifyQuery], z: &mut [f32], width: usize, block: usize) {
+        use rayon::prelude::*;
+        let Some(valleys) = &self.valleys else {
+            return;
+        };
+        let (width, block) = (width.max(1), block.max(1));
+        z.par_chunks_mut(width * block)
+            .zip(queries.par_chunks(width * block))
+            .for_each(|(zs, qs)| {
+                let rows = zs.len() / width;
+                let mut plan = valleys::Plan::default();
+                let (mut bq, mut bb, mut bz, mut idx) =
+                    (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+                for col0 in (0..width).step_by(block) {
+                    let col1 = (col0 + block).min(width);
+                    bq.clear();
+                    bb.clear();
+                    bz.clear();
+                    idx.clear();
+                    for r in 0..rows {
+                        for k in r * width + col0..r * width + col1 {
+                            bq.push(qs[k]);
+                            bb.push(self.base_of(&qs[k]));
+                            bz.push(zs[k]);
+                            idx.push(k);
+                        }
+                    }
+                    valleys.carve_points(self.mesh, &bq, &bb, &mut bz, &mut plan);
+                    for (&k, &v) in idx.iter().zip(&bz) {
+                        zs[k] = v;
+                    }
+                }
+            });
+    }
+
     /// Crust elevation (barycentric) of a query, metres.
     fn base_of(&self, q: &AmplifyQuery) -> f32 {
         let v = &self.vertices;
@@ -298,7 +337,7 @@ impl<'a> Amplifier<'a> {
     }
 
     /// Amplified elevation of a query from the primitives alone (no valleys), metres.
-    fn primitives_of(&self, q: &AmplifyQuery) -> f32 {
+    pub fn primitives_of(&self, q: &AmplifyQuery) -> f32 {
         match &self.exemplars {
             None => amplify_point(&self.uniform, &self.vertices, q),
             Some(set) => {

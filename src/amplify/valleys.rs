@@ -213,7 +213,7 @@ impl Valleys {
             }
         }
         let levels = trib_levels(spacing_km);
-        let cell = reach_km / mesh.radius_km;
+        let cell = 3.0 * reach_km / mesh.radius_km;
         let frame = (0..n)
             .map(|i| {
                 let r = receiver[i];
@@ -311,70 +311,185 @@ impl Valleys {
 
     /// The carved elevation at query `q`, metres: `amplified` (the primitives' value there)
     /// with the valleys of the reaches near it; `base` is the crust elevation there (the
-    /// barycentric one).
+    /// barycentric one). [`Self::carve_points`] does many points at once, for less.
     pub fn carve(&self, mesh: &SphereMesh, q: &AmplifyQuery, base: f32, amplified: f32) -> f32 {
-        let corners = [q.c0 as usize, q.c1 as usize, q.c2 as usize];
-        let p0 = DVec3::new(f64::from(q.dx), f64::from(q.dy), f64::from(q.dz));
-        let amp_here = f64::from(
-            q.w0 * self.amp_m[corners[0]]
-                + q.w1 * self.amp_m[corners[1]]
-                + q.w2 * self.amp_m[corners[2]],
-        )
-        .max(30.0);
-        // On land the valleys' walls are capped by the crust raised a little, with the
-        // primitives' crests (their relief above the crust) on top: the divides keep their
-        // peaks, and their cols drain (the crust is flat or tilted within a triangle, so the cap
-        // has no pit of its own). At sea the cap is the primitives' elevation. Continuous: the
-        // land's cap takes over within the first CAP_RAMP_M of crust elevation.
-        let land = (f64::from(base) / CAP_RAMP_M).clamp(0.0, 1.0);
-        let relief = f64::from(amplified - base);
-        let land_cap = f64::from(base) + CAP_AMPS * amp_here + relief.max(0.0);
-        let cap = f64::from(amplified) + (land_cap - f64::from(amplified)) * land;
-        // The grid lists the reaches within reach of any point of a cell moved by at most the
-        // warp, so the cell of the point itself is the one to read.
-        let candidates = match self.keys.binary_search(&cell_key(p0, self.cell)) {
-            Ok(c) => &self.reaches[self.starts[c] as usize..self.starts[c + 1] as usize],
-            Err(_) => return cap as f32, // no reach comes this close
-        };
-        // The warp moves the valleys by less than the tributaries' spacing: without them (an
-        // output too coarse to show them), it would not show either.
-        let p = if self.detail == 0 { p0 } else { self.warp(p0) };
-        // Nothing above the cap matters.
-        let mut surface = cap;
-        let m = (1.0 + MOD_GAIN * relief / amp_here).clamp(MOD_RANGE.0, MOD_RANGE.1);
-        let mut visit = |i: usize| {
+        let mut z = [amplified];
+        self.carve_points(
+            mesh,
+            std::slice::from_ref(q),
+            &[base],
+            &mut z,
+            &mut Plan::default(),
+        );
+        z[0]
+    }
+
+    /// [`Self::carve`] for a set of points at once: `amplified[k]` (the primitives' value at
+    /// query `qs[k]`, whose crust elevation is `bases[k]`) becomes the carved value there, the
+    /// same bits as [`Self::carve`] gives it alone. Any set works; points close together (a
+    /// block of pixels) share the search for the tributaries near them. `plan` is scratch space,
+    /// kept between calls to save allocations.
+    pub fn carve_points(
+        &self,
+        mesh: &SphereMesh,
+        qs: &[AmplifyQuery],
+        bases: &[f32],
+        amplified: &mut [f32],
+        plan: &mut Plan,
+    ) {
+        plan.points.clear();
+        plan.candidates.clear();
+        plan.cells.clear();
+        // The previous point's cell (points in a row share most cells).
+        let mut last_cell: Option<(u64, Result<usize, usize>)> = None;
+        for (k, (q, (&base, z))) in qs
+            .iter()
+            .zip(bases.iter().zip(amplified.iter_mut()))
+            .enumerate()
+        {
+            let corners = [q.c0 as usize, q.c1 as usize, q.c2 as usize];
+            let p0 = DVec3::new(f64::from(q.dx), f64::from(q.dy), f64::from(q.dz));
+            let amp_here = f64::from(
+                q.w0 * self.amp_m[corners[0]]
+                    + q.w1 * self.amp_m[corners[1]]
+                    + q.w2 * self.amp_m[corners[2]],
+            )
+            .max(30.0);
+            // On land the valleys' walls are capped by the crust raised a little, with the
+            // primitives' crests (their relief above the crust) on top: the divides keep their
+            // peaks, and their cols drain (the crust is flat or tilted within a triangle, so the
+            // cap has no pit of its own). At sea the cap is the primitives' elevation.
+            // Continuous: the land's cap takes over within the first CAP_RAMP_M of crust
+            // elevation.
+            let amplified = *z;
+            let land = (f64::from(base) / CAP_RAMP_M).clamp(0.0, 1.0);
+            let relief = f64::from(amplified - base);
+            let land_cap = f64::from(base) + CAP_AMPS * amp_here + relief.max(0.0);
+            let cap = f64::from(amplified) + (land_cap - f64::from(amplified)) * land;
+            // The grid lists the reaches within reach of any point of a cell moved by at most
+            // the warp, so the cell of the point itself is the one to read.
+            let key = cell_key(p0, self.cell);
+            let cell = match last_cell {
+                Some((k, c)) if k == key => c,
+                _ => {
+                    let c = self.keys.binary_search(&key);
+                    if let Ok(c) = c
+                        && !plan.cells.contains(&c)
+                    {
+                        // A new cell: its reaches join the candidates.
+                        plan.cells.push(c);
+                        plan.candidates.extend_from_slice(
+                            &self.reaches[self.starts[c] as usize..self.starts[c + 1] as usize],
+                        );
+                    }
+                    last_cell = Some((key, c));
+                    c
+                }
+            };
+            if cell.is_err() {
+                // No reach comes this close.
+                *z = cap as f32;
+                continue;
+            }
+            // The warp moves the valleys by less than the tributaries' spacing: without them
+            // (an output too coarse to show them), it would not show either.
+            let p = if self.detail == 0 { p0 } else { self.warp(p0) };
+            let m = (1.0 + MOD_GAIN * relief / amp_here).clamp(MOD_RANGE.0, MOD_RANGE.1);
+            plan.points.push(PlanPoint { k, p, cap, m });
+        }
+        if plan.points.is_empty() {
+            return;
+        }
+        // A reach listed for another point's cell lies beyond the reach of this one (it is
+        // skipped point by point), so the union of the points' lists serves them all.
+        plan.candidates.sort_unstable();
+        plan.candidates.dedup();
+        // The points lie within `rb` km of `c` (in every reach's plane too: the plane's
+        // coordinates are an orthonormal projection of the scaled position).
+        let c = plan
+            .points
+            .iter()
+            .fold(DVec3::ZERO, |s, pt| s + pt.p)
+            .normalize_or_zero();
+        let rb = plan
+            .points
+            .iter()
+            .fold(0.0f64, |r, pt| r.max((pt.p - c).length()))
+            * self.radius_km;
+        self.build_plan(mesh, c, rb, plan);
+        let levels = &self.levels[..self.detail];
+        for pt in &plan.points {
+            let (p, m, cap) = (pt.p, pt.m, pt.cap);
+            // Nothing above the cap matters.
+            let mut surface = cap;
+            for pr in &plan.reaches {
+                let i = pr.i as usize;
+                let (u, nrm, len) = self.frame[i];
+                let rel = (p - mesh.positions[i]) * self.radius_km;
+                let (x, y) = (rel.dot(u), rel.dot(nrm));
+                // Distance to the reach's course; beyond the reach it offers nothing, and over
+                // its outer part its surface is blended up to the cap (continuous, so no seam
+                // where a point stops seeing this reach).
+                let xc = x.clamp(0.0, len);
+                let d_main = ((x - xc) * (x - xc) + y * y).sqrt();
+                if d_main >= self.reach_km {
+                    continue;
+                }
+                let blend_from = (1.0 - REACH_FADE_SHARE) * self.reach_km;
+                let t = ((d_main - blend_from) / (self.reach_km - blend_from)).clamp(0.0, 1.0);
+                // No valley of this reach's comes below its lowest bed plus the wall climbed
+                // from the nearest its tributaries reach: skip it if that is no lower than what
+                // is there.
+                let bound = pr.seg.bed_a.min(pr.seg.bed_b)
+                    + pr.slope
+                        * m
+                        * (d_main - self.trib_reach_km - pr.floor.max(TRIB_FLOOR_KM)).max(0.0);
+                if bound >= surface {
+                    continue;
+                }
+                let tree = Tree {
+                    levels,
+                    nodes: &plan.nodes,
+                    floor_km: pr.floor,
+                    m,
+                };
+                let s = tree.surface(&pr.seg, &pr.geo, pr.children, (x, y), 0, pr.slope, surface);
+                // Over the outer part of the reach, blended up to the cap: at the reach's edge
+                // it is nowhere below the cap, so leaving it out there changes nothing.
+                surface = surface.min(s + t * t * (cap - s).max(0.0));
+            }
+            amplified[pt.k] = surface as f32;
+        }
+    }
+
+    /// The reaches of `plan.candidates` and their tributaries (to the last level carved) that
+    /// can carve a point within `rb` km of `c`.
+    fn build_plan(&self, mesh: &SphereMesh, c: DVec3, rb: f64, plan: &mut Plan) {
+        plan.reaches.clear();
+        plan.nodes.clear();
+        let levels = &self.levels[..self.detail];
+        for &i in &plan.candidates {
+            let i = i as usize;
             let r = self.receiver[i];
             if r == u32::MAX {
-                return;
+                continue;
             }
-            let r = r as usize;
             let (u, nrm, len) = self.frame[i];
             if len <= 0.0 {
-                return;
+                continue;
             }
-            let rel = (p - mesh.positions[i]) * self.radius_km;
+            let rel = (c - mesh.positions[i]) * self.radius_km;
             let (x, y) = (rel.dot(u), rel.dot(nrm));
-            // Distance to the reach's course; beyond the reach it offers nothing, and over its
-            // outer part its surface is blended up to the cap (continuous, so no seam where a
-            // point stops seeing this reach).
             let xc = x.clamp(0.0, len);
             let d_main = ((x - xc) * (x - xc) + y * y).sqrt();
-            if d_main >= self.reach_km {
-                return;
+            if d_main - rb >= self.reach_km {
+                continue;
             }
-            let blend_from = (1.0 - REACH_FADE_SHARE) * self.reach_km;
-            let t = ((d_main - blend_from) / (self.reach_km - blend_from)).clamp(0.0, 1.0);
             let bed_a = f64::from(self.bed_m[i]);
             // An ocean receiver (no bed) is at sea level; `bed_a` was raised to it.
-            let bed_b = match self.bed_m[r] {
+            let bed_b = match self.bed_m[r as usize] {
                 b if b.is_nan() => 0.0,
                 b => f64::from(b),
-            };
-            let reach = Reach {
-                slope_m_per_km: 1000.0 * f64::from(self.slope[i]),
-                floor_km: f64::from(self.floor_km[i]),
-                key: i as u64,
-                levels: &self.levels[..self.detail],
             };
             let seg = Seg {
                 a: (0.0, 0.0),
@@ -382,25 +497,70 @@ impl Valleys {
                 bed_a,
                 bed_b,
             };
-            // No valley of this reach's comes below its lowest bed plus the wall climbed from
-            // the nearest its tributaries reach: skip it if that is no lower than what is there.
-            let bound = bed_a.min(bed_b)
-                + reach.slope_m_per_km
-                    * m
-                    * (d_main - self.trib_reach_km - reach.floor_km.max(TRIB_FLOOR_KM)).max(0.0);
-            if bound >= surface {
-                return;
-            }
-            let s = reach.surface(&seg, (x, y), 0, reach.slope_m_per_km, m, surface);
-            // Over the outer part of the reach, blended up to the cap: at the reach's edge it is
-            // nowhere below the cap, so leaving it out there changes nothing.
-            surface = surface.min(s + t * t * (cap - s).max(0.0));
-        };
-        for &i in candidates {
-            visit(i as usize);
+            let slope = 1000.0 * f64::from(self.slope[i]);
+            let children = plan_tributaries(
+                levels,
+                i as u64,
+                &seg,
+                0,
+                slope,
+                (x, y),
+                rb,
+                &mut plan.nodes,
+            );
+            plan.reaches.push(PlanReach {
+                i: i as u32,
+                seg,
+                geo: Geo::of(&seg),
+                slope,
+                floor: f64::from(self.floor_km[i]),
+                children,
+            });
         }
-        surface as f32
     }
+}
+
+/// Scratch space of [`Valleys::carve_points`]: the points, the reaches near them, and the
+/// tributaries that can carve them.
+#[derive(Clone, Debug, Default)]
+pub struct Plan {
+    points: Vec<PlanPoint>,
+    cells: Vec<usize>,
+    candidates: Vec<u32>,
+    reaches: Vec<PlanReach>,
+    nodes: Vec<Node>,
+}
+
+/// A point to carve: its index in the call, its (warped) position, cap and wall factor.
+#[derive(Clone, Copy, Debug)]
+struct PlanPoint {
+    k: usize,
+    p: DVec3,
+    cap: f64,
+    m: f64,
+}
+
+/// A reach in a plan: its upstream sample, its course in its own plane (km; beds in metres),
+/// the main valley's wall slope (m/km) and floor (km), and its tributaries (`Plan::nodes`).
+#[derive(Clone, Copy, Debug)]
+struct PlanReach {
+    i: u32,
+    seg: Seg,
+    geo: Geo,
+    slope: f64,
+    floor: f64,
+    children: (u32, u32),
+}
+
+/// A tributary in a plan: its course in its reach's plane, its wall slope (m/km), the side of
+/// its parent it lies on (±1), and its own tributaries (a range of `Plan::nodes`).
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    seg: Seg,
+    geo: Geo,
+    slope: f64,
+    side: f64,
+    children: (u32, u32),
 }
 
 /// The key of the grid cell (`cell` wide, unit-sphere units) holding `p`.
@@ -477,21 +637,40 @@ struct Seg {
     bed_b: f64,
 }
 
-/// Squared distance from `p` to segment `s`, km².
-fn seg_distance2(s: &Seg, p: (f64, f64)) -> f64 {
-    let (dx, dy) = (s.b.0 - s.a.0, s.b.1 - s.a.1);
-    let (rx, ry) = (p.0 - s.a.0, p.1 - s.a.1);
-    let t = ((rx * dx + ry * dy) / (dx * dx + dy * dy).max(1e-30)).clamp(0.0, 1.0);
-    (rx - dx * t).powi(2) + (ry - dy * t).powi(2)
+/// What a point's distance to a segment needs of it, computed once per segment: its vector
+/// (km), length, unit direction, and squared length (at least 1e-30).
+#[derive(Clone, Copy, Debug)]
+struct Geo {
+    dx: f64,
+    dy: f64,
+    len: f64,
+    ux: f64,
+    uy: f64,
+    len2: f64,
 }
 
-/// What a reach's valleys share: the main valley's wall slope and floor, the random key, and
-/// the tributary levels of the mesh.
-struct Reach<'a> {
-    slope_m_per_km: f64,
-    floor_km: f64,
-    key: u64,
-    levels: &'a [TribLevel],
+impl Geo {
+    fn of(s: &Seg) -> Self {
+        let (dx, dy) = (s.b.0 - s.a.0, s.b.1 - s.a.1);
+        let l2 = dx * dx + dy * dy;
+        let len = l2.sqrt();
+        Self {
+            dx,
+            dy,
+            len,
+            ux: dx / len,
+            uy: dy / len,
+            len2: l2.max(1e-30),
+        }
+    }
+}
+
+/// Squared distance from `p` to segment `s` (whose [`Geo`] is `g`), km².
+fn seg_distance2(s: &Seg, g: &Geo, p: (f64, f64)) -> f64 {
+    let (dx, dy) = (g.dx, g.dy);
+    let (rx, ry) = (p.0 - s.a.0, p.1 - s.a.1);
+    let t = ((rx * dx + ry * dy) / g.len2).clamp(0.0, 1.0);
+    (rx - dx * t).powi(2) + (ry - dy * t).powi(2)
 }
 
 /// One level of tributaries: junction spacing along the parent, longest tributary, and the
@@ -559,18 +738,165 @@ const GOLDEN: u64 = 0x9e37_79b9_7f4a_7c15;
 /// has is not trusted to the last rounding.
 const BOUND_MARGIN_M: f64 = 1e-6;
 
-impl Reach<'_> {
-    /// The lowest valley surface of `seg` and its tributaries (to the last level) at `p`,
-    /// metres; `slope` is `seg`'s wall slope (m/km), `m` the point's wall factor. Tributaries
-    /// that cannot come below `ub` (what the point already has) are skipped: the answer is exact
-    /// wherever it is below `ub`.
-    fn surface(&self, seg: &Seg, p: (f64, f64), level: usize, slope: f64, m: f64, ub: f64) -> f64 {
-        let (dx, dy) = (seg.b.0 - seg.a.0, seg.b.1 - seg.a.1);
-        let len = (dx * dx + dy * dy).sqrt();
+/// The tributaries of `seg` (a reach's course, or a tributary's, in the reach's plane) at
+/// `level` and below, appended to `nodes`, that can carve a point within `rb` km of `c` (the
+/// same plane): the range of `nodes` holding the first level's. `key` is the reach's random key,
+/// `slope` `seg`'s wall slope (m/km).
+#[allow(clippy::too_many_arguments)]
+fn plan_tributaries(
+    levels: &[TribLevel],
+    key: u64,
+    seg: &Seg,
+    level: usize,
+    slope: f64,
+    c: (f64, f64),
+    rb: f64,
+    nodes: &mut Vec<Node>,
+) -> (u32, u32) {
+    let start = nodes.len() as u32;
+    let Some(lv) = levels.get(level) else {
+        return (start, start);
+    };
+    let (dx, dy) = (seg.b.0 - seg.a.0, seg.b.1 - seg.a.1);
+    let len = (dx * dx + dy * dy).sqrt();
+    if len <= 1e-9 {
+        return (start, start);
+    }
+    let (ux, uy) = (dx / len, dy / len);
+    let (rx, ry) = (c.0 - seg.a.0, c.1 - seg.a.1);
+    let along = rx * ux + ry * uy;
+    let t = (along / len).clamp(0.0, 1.0);
+    let (cx, cy) = (rx - dx * t, ry - dy * t);
+    let d = (cx * cx + cy * cy).sqrt();
+    let (spacing, max_len) = (lv.spacing_km, lv.max_len_km);
+    let max_len = max_len.min(0.6 * len.max(spacing));
+    // A tributary carves within `rho` of its course and is blended into its parent's wall over
+    // the next `fade` (so that it ends without a step); every tributary lies within `max_len`
+    // of its parent.
+    let rho = lv.influence_km;
+    let fade = 0.5 * rho;
+    let reach = rho + fade;
+    if d - rb > max_len + reach {
+        return (start, start);
+    }
+    let across = (c.1 - seg.a.1) * ux - (c.0 - seg.a.0) * uy;
+    // What every tributary of this level shares: the hash of the reach and level, and the
+    // tributaries' wall slope.
+    let key_level = mix64(key ^ mix64((0x7661_6c6c + level as u64).wrapping_add(GOLDEN)));
+    let steeper = (slope * TRIB_STEEPER)
+        .min(MAX_TRIB_SLOPE_M_PER_KM)
+        .max(slope);
+    let last_k = (len / spacing) as i64;
+    for side in [-1.0f64, 1.0] {
+        // The points' distance out from the parent on this side (negative: on the other side).
+        let out = side * across;
+        let (out_lo, out_hi) = (out - rb, out + rb);
+        if out_hi <= -reach {
+            continue; // every tributary of this side lies beyond the parent
+        }
+        // A tributary runs upstream from its junction at 45–80° to its parent: within `reach`
+        // of a point only if its junction is no more than `reach` upstream of the point's
+        // position along the parent, nor more than its run (`max_len`·cos 45°) downstream; and
+        // within `reach` of the line through it at its angle: the point's position plus
+        // out·cot θ (cot θ within 0.18–1), give or take reach / sin θ (at most √2·reach).
+        let slack = std::f64::consts::SQRT_2 * reach;
+        let (along_lo, along_hi) = (along - rb, along + rb);
+        let lo = (along_lo - reach).max(along_lo + (0.17 * out_lo).min(out_lo) - slack);
+        let hi = (along_hi + reach + std::f64::consts::FRAC_1_SQRT_2 * max_len)
+            .min(along_hi + out_hi.max(0.17 * out_hi) + slack);
+        // Junction k lies within [k + 0.2, k + 0.8] spacings (a little slack either way).
+        let k0 = ((lo / spacing - 0.8).floor() as i64).max(0);
+        let k1 = ((hi / spacing - 0.2).ceil() as i64).min(last_k);
+        for k in k0..=k1 {
+            let kk = k as u64;
+            // One hash, three 21-bit uniforms: the junction's jitter, the angle, the length.
+            let bits = mix64(key_level.wrapping_add(kk << 1 | u64::from(side > 0.0)));
+            let h = |n: u64| ((bits >> (21 * n)) & 0x1f_ffff) as f64 / (1u64 << 21) as f64;
+            let xk = (kk as f64 + 0.5 + 0.6 * (h(0) - 0.5)) * spacing;
+            if !(0.0..=len).contains(&xk) {
+                continue;
+            }
+            let l = max_len * (0.5 + 0.5 * h(2));
+            let (jx, jy) = (seg.a.0 + ux * xk, seg.a.1 + uy * xk);
+            // The whole tributary lies within `l` of its junction.
+            let (ex, ey) = (c.0 - jx, c.1 - jy);
+            let far = l + reach + rb + 1e-6;
+            if ex * ex + ey * ey > far * far {
+                continue;
+            }
+            let bed_j = seg.bed_a + (seg.bed_b - seg.bed_a) * (xk / len);
+            // The angle to the parent, 45–80° (its tangent 1–5.7), without trigonometry.
+            let tan = 1.0 + 4.7 * h(1);
+            let (cos, sin) = (
+                1.0 / (1.0 + tan * tan).sqrt(),
+                tan / (1.0 + tan * tan).sqrt(),
+            );
+            // The tributary's head, upstream of the junction on its side.
+            let (tx, ty) = (-cos * l, side * sin * l);
+            let head = (jx + ux * tx - uy * ty, jy + uy * tx + ux * ty);
+            // The head lies l·sin θ out on the parent's wall: its bed climbs part of that rise.
+            let trib = Seg {
+                a: head,
+                b: (jx, jy),
+                bed_a: bed_j + TRIB_BED_SHARE * slope * l * sin,
+                bed_b: bed_j,
+            };
+            nodes.push(Node {
+                seg: trib,
+                geo: Geo::of(&trib),
+                slope: steeper,
+                side,
+                children: (0, 0),
+            });
+        }
+    }
+    let end = nodes.len() as u32;
+    for n in start..end {
+        let node = nodes[n as usize];
+        let children =
+            plan_tributaries(levels, key, &node.seg, level + 1, node.slope, c, rb, nodes);
+        nodes[n as usize].children = children;
+    }
+    (start, end)
+}
+
+/// A reach's tree of tributaries in a plan, as one point sees it: the levels carved, the
+/// plan's tributaries, the main valley's floor (km), and the point's wall factor.
+struct Tree<'a> {
+    levels: &'a [TribLevel],
+    nodes: &'a [Node],
+    floor_km: f64,
+    m: f64,
+}
+
+impl Tree<'_> {
+    /// The lowest valley surface at `p` of `seg` (at `level`: 0 for the reach's main valley)
+    /// and of its tributaries `children` (a range of the plan's nodes), metres; `slope` is
+    /// `seg`'s wall slope (m/km). Tributaries that cannot come below `ub` (what the point
+    /// already has) are skipped: the answer is exact wherever it is below `ub`.
+    #[allow(clippy::too_many_arguments)]
+    fn surface(
+        &self,
+        seg: &Seg,
+        geo: &Geo,
+        children: (u32, u32),
+        p: (f64, f64),
+        level: usize,
+        slope: f64,
+        ub: f64,
+    ) -> f64 {
+        let m = self.m;
+        let Geo {
+            dx,
+            dy,
+            len,
+            ux,
+            uy,
+            ..
+        } = *geo;
         if len <= 1e-9 {
             return f64::INFINITY;
         }
-        let (ux, uy) = (dx / len, dy / len);
         let (rx, ry) = (p.0 - seg.a.0, p.1 - seg.a.1);
         let along = rx * ux + ry * uy;
         let t = (along / len).clamp(0.0, 1.0);
@@ -589,9 +915,6 @@ impl Reach<'_> {
         };
         let (spacing, max_len) = (lv.spacing_km, lv.max_len_km);
         let max_len = max_len.min(0.6 * len.max(spacing));
-        // A tributary carves within `rho` of its course and is blended into its parent's wall
-        // over the next `fade` (so that it ends without a step); every tributary lies within
-        // `max_len` of its parent.
         let rho = lv.influence_km;
         let fade = 0.5 * rho;
         if d > max_len + rho + fade {
@@ -599,101 +922,44 @@ impl Reach<'_> {
         }
         let reach = rho + fade;
         let across = (p.1 - seg.a.1) * ux - (p.0 - seg.a.0) * uy;
-        // What every tributary of this level shares: the hash of the reach and level, the
-        // tributaries' wall slope, how far their own tributaries run.
-        let key = mix64(self.key ^ mix64((0x7661_6c6c + level as u64).wrapping_add(GOLDEN)));
-        let steeper = (slope * TRIB_STEEPER)
-            .min(MAX_TRIB_SLOPE_M_PER_KM)
-            .max(slope);
+        // How far the tributaries' own tributaries run.
         let below: f64 = self.levels[level + 1..].iter().map(|l| l.max_len_km).sum();
-        let last_k = (len / spacing) as i64;
-        for side in [-1.0f64, 1.0] {
-            // `p`'s distance out from the parent on this side (negative: on the other side).
-            let out_side = side * across;
-            if out_side <= -reach {
-                continue; // every tributary of this side lies beyond the parent
-            }
-            // A tributary's bed climbs across the parent's wall at TRIB_BED_SHARE of its slope
+        for node in &self.nodes[children.0 as usize..children.1 as usize] {
+            let trib = &node.seg;
+            let bed_j = trib.bed_b;
+            // A tributary's bed climbs across its parent's wall at TRIB_BED_SHARE of its slope
             // (and its own tributaries' beds from there), and its walls are steeper than that:
-            // nothing on this side comes below the parent's lowest bed plus that climb to `p`.
-            let climb = TRIB_BED_SHARE * slope * (out_side - below - TRIB_FLOOR_KM).max(0.0);
-            if seg.bed_a.min(seg.bed_b) + climb + BOUND_MARGIN_M >= best.min(ub) {
+            // nothing of it comes below its junction's bed plus that climb to `p`.
+            let climb =
+                TRIB_BED_SHARE * slope * (node.side * across - below - TRIB_FLOOR_KM).max(0.0);
+            if bed_j + climb + BOUND_MARGIN_M >= best.min(ub) {
                 continue;
             }
-            // A tributary runs upstream from its junction at 45–80° to its parent: within
-            // `reach` of `p` only if its junction is no more than `reach` upstream of `p`'s
-            // position along the parent, nor more than its run (`max_len`·cos 45°) downstream;
-            // and within `reach` of the line through it at its angle: `p`'s position plus
-            // out·cot θ (cot θ within 0.18–1), give or take reach / sin θ (at most √2·reach).
-            let slack = std::f64::consts::SQRT_2 * reach;
-            let (cot_lo, cot_hi) = if out_side >= 0.0 {
-                (0.17, 1.0)
-            } else {
-                (1.0, 0.17)
-            };
-            let lo = (along - reach).max(along + cot_lo * out_side - slack);
-            let hi = (along + reach + std::f64::consts::FRAC_1_SQRT_2 * max_len)
-                .min(along + cot_hi * out_side + slack);
-            // Junction k lies within [k + 0.2, k + 0.8] spacings (a little slack either way).
-            let k0 = ((lo / spacing - 0.8).floor() as i64).max(0);
-            let k1 = ((hi / spacing - 0.2).ceil() as i64).min(last_k);
-            for k in k0..=k1 {
-                let kk = k as u64;
-                // One hash, three 21-bit uniforms: the junction's jitter, the angle, the length.
-                let bits = mix64(key.wrapping_add(kk << 1 | u64::from(side > 0.0)));
-                let h = |n: u64| ((bits >> (21 * n)) & 0x1f_ffff) as f64 / (1u64 << 21) as f64;
-                let xk = (kk as f64 + 0.5 + 0.6 * (h(0) - 0.5)) * spacing;
-                if !(0.0..=len).contains(&xk) {
-                    continue;
-                }
-                let l = max_len * (0.5 + 0.5 * h(2));
-                let (jx, jy) = (seg.a.0 + ux * xk, seg.a.1 + uy * xk);
-                // The whole tributary lies within `l` of its junction.
-                let (ex, ey) = (p.0 - jx, p.1 - jy);
-                let far = l + reach + 1e-6;
-                if ex * ex + ey * ey > far * far {
-                    continue;
-                }
-                let bed_j = seg.bed_a + (seg.bed_b - seg.bed_a) * (xk / len);
-                if bed_j + climb + BOUND_MARGIN_M >= best.min(ub) {
-                    continue;
-                }
-                // The angle to the parent, 45–80° (its tangent 1–5.7), without trigonometry.
-                let tan = 1.0 + 4.7 * h(1);
-                let (cos, sin) = (
-                    1.0 / (1.0 + tan * tan).sqrt(),
-                    tan / (1.0 + tan * tan).sqrt(),
-                );
-                // The tributary's head, upstream of the junction on its side.
-                let (tx, ty) = (-cos * l, side * sin * l);
-                let head = (jx + ux * tx - uy * ty, jy + uy * tx + ux * ty);
-                // The head lies l·sin θ out on the parent's wall: its bed climbs part of that
-                // rise.
-                let trib = Seg {
-                    a: head,
-                    b: (jx, jy),
-                    bed_a: bed_j + TRIB_BED_SHARE * slope * l * sin,
-                    bed_b: bed_j,
-                };
-                let dt2 = seg_distance2(&trib, p);
-                if dt2 >= reach * reach {
-                    continue;
-                }
-                let dt = dt2.sqrt();
-                // Over the outer part of its reach, blended up to its parent's own surface: at
-                // the edge it is nowhere below its parent, so leaving it out there changes
-                // nothing.
-                let x = ((dt - rho) / fade).clamp(0.0, 1.0);
-                // Nothing in the tributary's tree comes below its junction's bed plus the wall
-                // climbed from the nearest its own tributaries reach: skip it if that is no
-                // lower than what is there (the same bits: the minimum would not change).
-                let bound = best.min(ub);
-                if bed_j + steeper * m * (dt - below - TRIB_FLOOR_KM).max(0.0) >= bound {
-                    continue;
-                }
-                let sub = self.surface(&trib, p, level + 1, steeper, m, bound);
-                best = best.min(sub + x * x * (own - sub).max(0.0));
+            let dt2 = seg_distance2(trib, &node.geo, p);
+            if dt2 >= reach * reach {
+                continue;
             }
+            let dt = dt2.sqrt();
+            // Over the outer part of its reach, blended up to its parent's own surface: at the
+            // edge it is nowhere below its parent, so leaving it out there changes nothing.
+            let x = ((dt - rho) / fade).clamp(0.0, 1.0);
+            // Nothing in the tributary's tree comes below its junction's bed plus the wall
+            // climbed from the nearest its own tributaries reach: skip it if that is no lower
+            // than what is there (the same bits: the minimum would not change).
+            let bound = best.min(ub);
+            if bed_j + node.slope * m * (dt - below - TRIB_FLOOR_KM).max(0.0) >= bound {
+                continue;
+            }
+            let sub = self.surface(
+                trib,
+                &node.geo,
+                node.children,
+                p,
+                level + 1,
+                node.slope,
+                bound,
+            );
+            best = best.min(sub + x * x * (own - sub).max(0.0));
         }
         best
     }

@@ -26,6 +26,10 @@ use crate::resources::{Crust, Orogeny};
 pub const MAX_SIDE: u32 = 16384;
 /// Rows computed per band when streaming (memory: band × width × 4 bytes per layer).
 pub const BAND_ROWS: u32 = 64;
+/// Width of the blocks of pixels whose valleys are carved together, km, and the most pixels a
+/// side (see `Amplifier::carve_band`).
+const VALLEY_BLOCK_KM: f64 = 0.8;
+const MAX_VALLEY_BLOCK: usize = 8;
 
 /// Errors of the exports.
 #[derive(Debug, thiserror::Error)]
@@ -453,6 +457,9 @@ pub fn export_amplified_on(
     let mut band = Vec::new();
     let mut queries = Vec::new();
     let mut row0 = 0;
+    // Blocks of pixels about a kilometre wide share the valleys' search.
+    let pixel_km = grid.dy_deg.to_radians() * amp.mesh.radius_km;
+    let block = ((VALLEY_BLOCK_KM / pixel_km).round() as usize).clamp(1, MAX_VALLEY_BLOCK);
     let f = |d: DVec3, hint: &mut u32| amp.elevation_m_hinted(d, hint);
     let locate = |d: DVec3, hint: &mut u32| amp.query_hinted(d, hint);
     while row0 < grid.height {
@@ -463,14 +470,21 @@ pub fn export_amplified_on(
                 band.clear();
                 band.resize(queries.len(), f32::NAN);
                 kernel.run(ctx, &queries, &mut band)?;
-                if amp.valleys.is_some() {
-                    // The valleys are carved on the CPU, after the kernel.
-                    use rayon::prelude::*;
-                    band.par_iter_mut()
-                        .zip(queries.par_iter())
+                // The valleys are carved on the CPU, after the kernel.
+                amp.carve_band(&queries, &mut band, grid.width as usize, block);
+            }
+            None if amp.valleys.is_some() => {
+                // The primitives pixel by pixel, then the valleys block by block.
+                use rayon::prelude::*;
+                grid.band_hinted(row0, rows, &locate, &mut queries);
+                band.clear();
+                band.par_extend(
+                    queries
+                        .par_iter()
                         .with_min_len(1024)
-                        .for_each(|(z, q)| *z = amp.carve(q, *z));
-                }
+                        .map(|q| amp.primitives_of(q)),
+                );
+                amp.carve_band(&queries, &mut band, grid.width as usize, block);
             }
             None => grid.band_hinted(row0, rows, &f, &mut band),
         }

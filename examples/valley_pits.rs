@@ -2,7 +2,8 @@
 //! (issue 19's measure), counted over all the land and over the land that drains to the sea in
 //! the coarse network (outside its closed basins, whose depressions the valleys keep).
 //!
-//! `cargo run --release --example valley_pits -- SAVE LAT0,LON0,LAT1,LON1 [DEPTH_M]`
+//! `cargo run --release --example valley_pits -- SAVE LAT0,LON0,LAT1,LON1 [DEPTH_M [PITS_PNG]]`
+//! (the PNG: the carved tile shaded, its pits red).
 
 use glam::DVec3;
 use tectonic_planets::amplify::valleys::drains_to_sea;
@@ -13,7 +14,7 @@ use tectonic_planets::io::rivers::{NetworkOptions, RiverNetwork};
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 3 {
-        eprintln!("usage: valley_pits SAVE LAT0,LON0,LAT1,LON1 [DEPTH_M]");
+        eprintln!("usage: valley_pits SAVE LAT0,LON0,LAT1,LON1 [DEPTH_M [PITS_PNG]]");
         std::process::exit(2);
     }
     let depth: f32 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(10.0);
@@ -67,6 +68,9 @@ fn main() {
                 n[k][1] += usize::from(depths[i] > depth);
             }
         }
+        if let (Some(path), "valleys") = (args.get(4), name) {
+            write_pits(path, &z, &depths, w, h, depth);
+        }
         let pct = |c: [usize; 2]| 100.0 * c[1] as f64 / c[0].max(1) as f64;
         println!(
             "{name}: {w}x{h}, land in pits deeper than {depth} m {:.2}%; on land draining to the sea ({:.1}% of the land) {:.2}%, in the coarse closed basins {:.2}%",
@@ -76,4 +80,29 @@ fn main() {
             pct(n[1])
         );
     }
+}
+
+/// The carved tile shaded from the north-west (grey; sea blue), its pits deeper than `depth`
+/// red, as a PNG at `path`.
+fn write_pits(path: &str, z: &[f32], depths: &[f32], w: usize, h: usize, depth: f32) {
+    let mut img = image::RgbImage::new(w as u32, h as u32);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let (xl, yu) = (x.saturating_sub(1), y.saturating_sub(1));
+            // Slope towards the north-west light, 100 m pixels.
+            let s = (z[i] - 0.5 * (z[y * w + xl] + z[yu * w + x])) / 100.0;
+            let g = (150.0 + 300.0 * s).clamp(20.0, 255.0) as u8;
+            let px = if z[i] <= 0.0 {
+                [40, 70, 140]
+            } else if depths[i] > depth {
+                [220, 30, 30]
+            } else {
+                [g, g, g]
+            };
+            img.put_pixel(x as u32, y as u32, image::Rgb(px));
+        }
+    }
+    img.save(path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    println!("wrote {path}");
 }

@@ -313,14 +313,20 @@ impl Valleys {
     /// with the valleys of the reaches near it; `base` is the crust elevation there (the
     /// barycentric one). [`Self::carve_points`] does many points at once, for less.
     pub fn carve(&self, mesh: &SphereMesh, q: &AmplifyQuery, base: f32, amplified: f32) -> f32 {
+        thread_local! {
+            // The plan's buffers, kept from one point to the next.
+            static PLAN: std::cell::RefCell<Plan> = std::cell::RefCell::new(Plan::default());
+        }
         let mut z = [amplified];
-        self.carve_points(
-            mesh,
-            std::slice::from_ref(q),
-            &[base],
-            &mut z,
-            &mut Plan::default(),
-        );
+        PLAN.with(|plan| {
+            self.carve_points(
+                mesh,
+                std::slice::from_ref(q),
+                &[base],
+                &mut z,
+                &mut plan.borrow_mut(),
+            );
+        });
         z[0]
     }
 

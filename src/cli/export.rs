@@ -378,7 +378,7 @@ pub(crate) fn write_extra_exports_on(
             width: grid.width / k,
             height: grid.height / k,
         };
-        let after = pgrid.sample(&|d| amp.elevation_m(d));
+        let after = export::amplified_values(&amp, &pgrid);
         let before = pgrid.sample(&|d| amp.crust_elevation_m(d));
         for (name, z) in [
             ("amplified_preview.png", after),

@@ -13,7 +13,7 @@ use glam::DVec3;
 use image::RgbImage;
 use rayon::prelude::*;
 
-use crate::amplify::Amplifier;
+use crate::amplify::{Amplifier, AmplifyQuery};
 use crate::geometry::SphereMesh;
 use crate::gpu::GpuContext;
 use crate::gpu::amplify::AmplifyGpu;
@@ -457,10 +457,6 @@ pub fn export_amplified_on(
     let mut band = Vec::new();
     let mut queries = Vec::new();
     let mut row0 = 0;
-    // Blocks of pixels about a kilometre wide share the valleys' search.
-    let pixel_km = grid.dy_deg.to_radians() * amp.mesh.radius_km;
-    let block = ((VALLEY_BLOCK_KM / pixel_km).round() as usize).clamp(1, MAX_VALLEY_BLOCK);
-    let f = |d: DVec3, hint: &mut u32| amp.elevation_m_hinted(d, hint);
     let locate = |d: DVec3, hint: &mut u32| amp.query_hinted(d, hint);
     while row0 < grid.height {
         let rows = BAND_ROWS.min(grid.height - row0);
@@ -471,22 +467,14 @@ pub fn export_amplified_on(
                 band.resize(queries.len(), f32::NAN);
                 kernel.run(ctx, &queries, &mut band)?;
                 // The valleys are carved on the CPU, after the kernel.
-                amp.carve_band(&queries, &mut band, grid.width as usize, block);
-            }
-            None if amp.valleys.is_some() => {
-                // The primitives pixel by pixel, then the valleys block by block.
-                use rayon::prelude::*;
-                grid.band_hinted(row0, rows, &locate, &mut queries);
-                band.clear();
-                band.par_extend(
-                    queries
-                        .par_iter()
-                        .with_min_len(1024)
-                        .map(|q| amp.primitives_of(q)),
+                amp.carve_band(
+                    &queries,
+                    &mut band,
+                    grid.width as usize,
+                    valley_block(grid, amp),
                 );
-                amp.carve_band(&queries, &mut band, grid.width as usize, block);
             }
-            None => grid.band_hinted(row0, rows, &f, &mut band),
+            None => amplify_band_cpu(amp, grid, row0, rows, &mut queries, &mut band),
         }
         for row in band.chunks(grid.width as usize) {
             if let Some(w) = png.as_mut() {
@@ -508,6 +496,55 @@ pub fn export_amplified_on(
         files.push(w.finish()?);
     }
     Ok(files)
+}
+
+/// Pixels a side of the blocks whose valleys `amp` carves together on `grid` (about
+/// [`VALLEY_BLOCK_KM`] wide).
+fn valley_block(grid: &GeoGrid, amp: &Amplifier) -> usize {
+    let pixel_km = grid.dy_deg.to_radians() * amp.mesh.radius_km;
+    ((VALLEY_BLOCK_KM / pixel_km).round() as usize).clamp(1, MAX_VALLEY_BLOCK)
+}
+
+/// The amplified elevation of rows `row0..row0 + rows` of `grid` on the CPU, into `band`
+/// (`queries`: scratch): pixel by pixel without valleys; with them, the primitives pixel by
+/// pixel and then the valleys block by block (the same bits as pixel by pixel, faster).
+fn amplify_band_cpu(
+    amp: &Amplifier,
+    grid: &GeoGrid,
+    row0: u32,
+    rows: u32,
+    queries: &mut Vec<AmplifyQuery>,
+    band: &mut Vec<f32>,
+) {
+    if amp.valleys.is_none() {
+        let f = |d: DVec3, hint: &mut u32| amp.elevation_m_hinted(d, hint);
+        grid.band_hinted(row0, rows, &f, band);
+        return;
+    }
+    let locate = |d: DVec3, hint: &mut u32| amp.query_hinted(d, hint);
+    grid.band_hinted(row0, rows, &locate, queries);
+    band.clear();
+    band.par_extend(
+        queries
+            .par_iter()
+            .with_min_len(1024)
+            .map(|q| amp.primitives_of(q)),
+    );
+    amp.carve_band(queries, band, grid.width as usize, valley_block(grid, amp));
+}
+
+/// The amplified elevation of every pixel of `grid`, row-major, on the CPU (band by band, as
+/// the exports compute it: the same bits as [`Amplifier::elevation_m`] pixel by pixel).
+pub fn amplified_values(amp: &Amplifier, grid: &GeoGrid) -> Vec<f32> {
+    let (mut out, mut band, mut queries) = (Vec::new(), Vec::new(), Vec::new());
+    let mut row0 = 0;
+    while row0 < grid.height {
+        let rows = BAND_ROWS.min(grid.height - row0);
+        amplify_band_cpu(amp, grid, row0, rows, &mut queries, &mut band);
+        out.extend_from_slice(&band);
+        row0 += rows;
+    }
+    out
 }
 
 /// The crust layers exported as GeoTIFFs, with their file stems and descriptions.

@@ -72,6 +72,8 @@ const WALL_RUN_SHARE: f64 = 0.75;
 const CAP_RAMP_M: f64 = 100.0;
 /// Reach of a river's valley from its course, in mesh spacings.
 const REACH_SPACINGS: f64 = 0.6;
+/// Width of the reach grid's cells, in valley reaches (`REACH_SPACINGS` mesh spacings).
+const GRID_CELL_REACHES: f64 = 3.0;
 /// Outer share of the reach over which a valley's surface is blended up to the cap, so that it
 /// ends without a step.
 const REACH_FADE_SHARE: f64 = 0.3;
@@ -213,7 +215,9 @@ impl Valleys {
             }
         }
         let levels = trib_levels(spacing_km);
-        let cell = 3.0 * reach_km / mesh.radius_km;
+        // Cells three valley reaches wide: each reach is listed in a few cells (the grid holds
+        // about two entries a sample), and a block of pixels reads one or two cells' lists.
+        let cell = GRID_CELL_REACHES * reach_km / mesh.radius_km;
         let frame = (0..n)
             .map(|i| {
                 let r = receiver[i];

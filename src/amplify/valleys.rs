@@ -64,7 +64,7 @@ const MOD_RANGE: (f64, f64) = (0.6, 1.6);
 /// The primitives' elevation caps the valleys' surfaces this many amplitudes above itself.
 const CAP_AMPS: f64 = 0.5;
 /// A main valley's walls climb to the crust plus this many amplitudes at the end of their run.
-const WALL_RISE_AMPS: f64 = 0.8;
+const WALL_RISE_AMPS: f64 = 0.6;
 /// ... over this share of the distance at which they start to be blended into the cap (so they
 /// meet the cap well before: no trace of the blend shows).
 const WALL_RUN_SHARE: f64 = 0.75;

@@ -224,6 +224,15 @@ impl ExemplarSet {
         }
     }
 
+    /// How far the relief of the exemplar assigned to `v` reaches above or below the crust,
+    /// metres: half its elevation range, scaled as [`Self::primitive`] scales it (`None`: no
+    /// exemplar).
+    pub fn relief_amplitude_m(&self, v: &AmplifyVertex) -> Option<f32> {
+        let e = self.exemplars.get((v.exemplar as usize).checked_sub(1)?)?;
+        let span = (e.range_m.1 - e.range_m.0).max(1.0);
+        Some(0.5 * span * exemplar_scale(v, span))
+    }
+
     /// The exemplar primitive of vertex `v` at unit direction `p`: (relief m, detail amplitude
     /// m), or `None` when the vertex has no exemplar. The exemplar is rotated so its mean fold
     /// direction lies along the vertex's fold direction, shifted by the vertex's random offset,
@@ -253,12 +262,17 @@ impl ExemplarSet {
         let col = (range_axis * c + compression_dir * s) / e.pixel_km;
         let row = (range_axis * s - compression_dir * c) / e.pixel_km;
         let span = (e.range_m.1 - e.range_m.0).max(1.0);
-        let scale = if v.kind == KIND_PLAIN {
-            1.0
-        } else {
-            (v.elevation_m / span).clamp(0.1, 1.0)
-        };
-        Some((e.relief_at(col, row) * scale, 5.0))
+        Some((e.relief_at(col, row) * exemplar_scale(v, span), 5.0))
+    }
+}
+
+/// The scale of an exemplar's relief (elevation range `span`, metres) at vertex `v`: the
+/// crust's height over the range on mountains, at most 1, at least 0.1; 1 on plains.
+fn exemplar_scale(v: &AmplifyVertex, span: f32) -> f32 {
+    if v.kind == KIND_PLAIN {
+        1.0
+    } else {
+        (v.elevation_m / span).clamp(0.1, 1.0)
     }
 }
 

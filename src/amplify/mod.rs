@@ -197,15 +197,23 @@ impl<'a> Amplifier<'a> {
     }
 
     /// Carves the river valleys of `network` (the drainage network of the crust this amplifier
-    /// was built from, on the same mesh) into the relief: see [`valleys`].
+    /// was built from, on the same mesh) into the relief: see [`valleys`]. Their incision and
+    /// walls follow the amplitude of each sample's primitive: an exemplar's relief where one is
+    /// assigned (call [`Self::with_exemplars`] first), the procedural one elsewhere.
     pub fn with_valleys(mut self, network: valleys::Network<'_>) -> Self {
-        self.valleys = Some(Valleys::new(
-            self.mesh,
-            network,
-            &self.vertices,
-            self.uniform.seed,
-            self.uniform.relief_scale,
-        ));
+        let scale = self.uniform.relief_scale;
+        let amp_m = self
+            .vertices
+            .iter()
+            .map(|v| {
+                let exemplar = self
+                    .exemplars
+                    .as_ref()
+                    .and_then(|s| s.relief_amplitude_m(v));
+                exemplar.unwrap_or_else(|| procedural::relief_amplitude_m(v)) * scale
+            })
+            .collect();
+        self.valleys = Some(Valleys::new(self.mesh, network, amp_m, self.uniform.seed));
         self
     }
 

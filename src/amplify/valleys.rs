@@ -38,7 +38,9 @@ use glam::DVec3;
 use crate::geometry::SphereMesh;
 use crate::random::mix64;
 
-use super::procedural::{AmplifyQuery, AmplifyVertex, noise3, relief_amplitude_m};
+#[cfg(doc)]
+use super::procedural::relief_amplitude_m;
+use super::procedural::{AmplifyQuery, noise3};
 
 /// No bed (ocean samples, samples without a reach).
 const NO_BED: f32 = f32::NAN;
@@ -148,16 +150,10 @@ pub struct Valleys {
 }
 
 impl Valleys {
-    /// The valleys of `drainage` (a network of the crust whose amplification `vertices` are),
-    /// on `mesh`; `seed` seeds the winding, and `relief_scale` (the amplifier's) scales the
-    /// incision and the walls with the primitives' relief.
-    pub fn new(
-        mesh: &SphereMesh,
-        drainage: Network<'_>,
-        vertices: &[AmplifyVertex],
-        seed: u32,
-        relief_scale: f32,
-    ) -> Self {
+    /// The valleys of `drainage` (a network of the crust on `mesh`); `amp_m` is the amplitude of
+    /// each sample's relief primitive, metres (as the amplifier scales it: see
+    /// [`relief_amplitude_m`]), which sets the incision and the walls; `seed` seeds the winding.
+    pub fn new(mesh: &SphereMesh, drainage: Network<'_>, amp_m: Vec<f32>, seed: u32) -> Self {
         let n = mesh.len();
         let spacing_km = mesh.mean_spacing_rad() * mesh.radius_km;
         let max_floor = MAX_FLOOR_KM.min(0.15 * spacing_km);
@@ -166,15 +162,11 @@ impl Valleys {
         let mut bed_m = vec![NO_BED; n];
         let mut floor_km = vec![0.0f32; n];
         let mut slope = vec![0.0f32; n];
-        let amp_m: Vec<f32> = vertices
-            .iter()
-            .map(|v| relief_amplitude_m(v) * relief_scale)
-            .collect();
         let ok = drainage.receiver.len() == n
             && drainage.area_km2.len() == n
             && drainage.water_level_km.len() == n
             && drainage.ocean.len() == n
-            && vertices.len() == n;
+            && amp_m.len() == n;
         if ok {
             let open = drains_to_sea(drainage);
             // Beds, from the outlets upstream (the stack lists every land sample after its

@@ -500,10 +500,12 @@ impl Valleys {
                 bed_b,
             };
             let slope = 1000.0 * f64::from(self.slope[i]);
+            let geo = Geo::of(&seg);
             let children = plan_tributaries(
                 levels,
                 i as u64,
                 &seg,
+                &geo,
                 0,
                 slope,
                 (x, y),
@@ -513,7 +515,7 @@ impl Valleys {
             plan.reaches.push(PlanReach {
                 i: i as u32,
                 seg,
-                geo: Geo::of(&seg),
+                geo,
                 slope,
                 floor: f64::from(self.floor_km[i]),
                 children,
@@ -667,6 +669,19 @@ impl Geo {
     }
 }
 
+/// Where `p` lies against segment `s` (whose [`Geo`] is `g`): its position along the segment's
+/// line (km), the clamped share of the segment at its projection, its distance to the segment,
+/// and its signed distance out from the line (positive on the left), km.
+fn project(s: &Seg, g: &Geo, p: (f64, f64)) -> (f64, f64, f64, f64) {
+    let (rx, ry) = (p.0 - s.a.0, p.1 - s.a.1);
+    let along = rx * g.ux + ry * g.uy;
+    let t = (along / g.len).clamp(0.0, 1.0);
+    let (cx, cy) = (rx - g.dx * t, ry - g.dy * t);
+    let d = (cx * cx + cy * cy).sqrt();
+    let across = ry * g.ux - rx * g.uy;
+    (along, t, d, across)
+}
+
 /// Squared distance from `p` to segment `s` (whose [`Geo`] is `g`), km².
 fn seg_distance2(s: &Seg, g: &Geo, p: (f64, f64)) -> f64 {
     let (dx, dy) = (g.dx, g.dy);
@@ -749,6 +764,7 @@ fn plan_tributaries(
     levels: &[TribLevel],
     key: u64,
     seg: &Seg,
+    geo: &Geo,
     level: usize,
     slope: f64,
     c: (f64, f64),
@@ -759,17 +775,11 @@ fn plan_tributaries(
     let Some(lv) = levels.get(level) else {
         return (start, start);
     };
-    let (dx, dy) = (seg.b.0 - seg.a.0, seg.b.1 - seg.a.1);
-    let len = (dx * dx + dy * dy).sqrt();
+    let Geo { len, ux, uy, .. } = *geo;
     if len <= 1e-9 {
         return (start, start);
     }
-    let (ux, uy) = (dx / len, dy / len);
-    let (rx, ry) = (c.0 - seg.a.0, c.1 - seg.a.1);
-    let along = rx * ux + ry * uy;
-    let t = (along / len).clamp(0.0, 1.0);
-    let (cx, cy) = (rx - dx * t, ry - dy * t);
-    let d = (cx * cx + cy * cy).sqrt();
+    let (along, _, d, across) = project(seg, geo, c);
     let (spacing, max_len) = (lv.spacing_km, lv.max_len_km);
     let max_len = max_len.min(0.6 * len.max(spacing));
     // A tributary carves within `rho` of its course and is blended into its parent's wall over
@@ -781,7 +791,6 @@ fn plan_tributaries(
     if d - rb > max_len + reach {
         return (start, start);
     }
-    let across = (c.1 - seg.a.1) * ux - (c.0 - seg.a.0) * uy;
     // What every tributary of this level shares: the hash of the reach and level, and the
     // tributaries' wall slope.
     let key_level = mix64(key ^ mix64((0x7661_6c6c + level as u64).wrapping_add(GOLDEN)));
@@ -855,8 +864,17 @@ fn plan_tributaries(
     let end = nodes.len() as u32;
     for n in start..end {
         let node = nodes[n as usize];
-        let children =
-            plan_tributaries(levels, key, &node.seg, level + 1, node.slope, c, rb, nodes);
+        let children = plan_tributaries(
+            levels,
+            key,
+            &node.seg,
+            &node.geo,
+            level + 1,
+            node.slope,
+            c,
+            rb,
+            nodes,
+        );
         nodes[n as usize].children = children;
     }
     (start, end)
@@ -888,22 +906,11 @@ impl Tree<'_> {
         ub: f64,
     ) -> f64 {
         let m = self.m;
-        let Geo {
-            dx,
-            dy,
-            len,
-            ux,
-            uy,
-            ..
-        } = *geo;
+        let len = geo.len;
         if len <= 1e-9 {
             return f64::INFINITY;
         }
-        let (rx, ry) = (p.0 - seg.a.0, p.1 - seg.a.1);
-        let along = rx * ux + ry * uy;
-        let t = (along / len).clamp(0.0, 1.0);
-        let (cx, cy) = (rx - dx * t, ry - dy * t);
-        let d = (cx * cx + cy * cy).sqrt();
+        let (_, t, d, across) = project(seg, geo, p);
         let floor = if level == 0 {
             self.floor_km
         } else {
@@ -923,7 +930,6 @@ impl Tree<'_> {
             return best;
         }
         let reach = rho + fade;
-        let across = (p.1 - seg.a.1) * ux - (p.0 - seg.a.0) * uy;
         // How far the tributaries' own tributaries run.
         let below: f64 = self.levels[level + 1..].iter().map(|l| l.max_len_km).sum();
         for node in &self.nodes[children.0 as usize..children.1 as usize] {

@@ -1,7 +1,13 @@
 //! Writes the small synthetic elevation exemplars shipped in `assets/exemplars/` (16-bit PNG +
-//! JSON sidecar per file): `cargo run --release --example make_exemplars [-- OUT_DIR]`.
+//! JSON sidecar per file): ridged noise whose drainage is then grown by stream power
+//! (`eroded_exemplar`): `cargo run --release --example make_exemplars [-- OUT_DIR]`.
 
-use tectonic_planets::amplify::exemplar::synthetic_exemplar;
+use tectonic_planets::amplify::exemplar::{eroded_exemplar, synthetic_exemplar};
+
+/// Steps of the landscape-evolution run that grows each exemplar's drainage.
+const EROSION_STEPS: usize = 150;
+/// Uplift at the noise's lowest point, as a share of that at its crests.
+const UPLIFT_FLOOR: f32 = 0.2;
 
 fn main() -> anyhow::Result<()> {
     let out = std::env::args()
@@ -18,7 +24,10 @@ fn main() -> anyhow::Result<()> {
         let dir = std::path::Path::new(&out).join(name);
         std::fs::create_dir_all(&dir)?;
         let size = 128;
-        let z = synthetic_exemplar(size, angle, wl, relief, 100 + k as u32);
+        // Ridged noise sets the grain (its ridges run along the rows); grown drainage makes it
+        // drain as real terrain does, to longitudinal valleys along its first and last rows.
+        let noise = synthetic_exemplar(size, angle, wl, relief, 100 + k as u32);
+        let z = eroded_exemplar(&noise, size, EROSION_STEPS, UPLIFT_FLOOR);
         let (lo, hi) = z
             .iter()
             .fold((f32::MAX, f32::MIN), |a, &v| (a.0.min(v), a.1.max(v)));
@@ -34,7 +43,7 @@ fn main() -> anyhow::Result<()> {
         img.save(&path)?;
         let meta = serde_json::json!({
             "min_elevation_m": lo, "max_elevation_m": hi, "pixel_size_m": px_m,
-            "note": "synthetic ridged-noise exemplar made by examples/make_exemplars.rs"
+            "note": "synthetic exemplar (ridged noise, then drainage grown by stream power) made by examples/make_exemplars.rs"
         });
         std::fs::write(
             path.with_extension("json"),

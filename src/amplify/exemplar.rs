@@ -309,6 +309,126 @@ pub fn synthetic_exemplar(
     out
 }
 
+/// Grows a drainage network into a grid of relief (`size × size`, row-major): a small
+/// landscape-evolution run in which the grid's own relief, normalised, sets the rate of uplift
+/// (never below `uplift_floor` of the highest), the first and last rows are base level, and
+/// rivers cut by
+/// stream power (`E = K·A^0.5·S`, solved implicitly along a priority-flood routing, so closed
+/// hollows fill and spill) for `steps` steps. Returns elevations spanning the input's range.
+///
+/// The ridged noise of [`synthetic_exemplar`] is a third hollows ringed by crests (closed pits
+/// deeper than 10 m under D8 routing); real terrain, which rivers shaped, has almost none (the
+/// shipped SRTM tile: 0.8%). After this the ridges still run along the input's grain, and the
+/// valleys between them branch and reach the base level.
+///
+/// Why only two rows: the lookup mirrors an exemplar at its borders ([`Exemplar::relief_at`]),
+/// and the mirror image of a drained grid drains too, except where water leaves it. Out through
+/// a base-level row, it lands on the row's own flat line, and flows on along it; out through a
+/// side, it would meet the valley's mirror image coming back up, a closed pit on every seam.
+/// With base level all round, the two other sides would show as straight valleys across the
+/// range every `size` pixels; along the first and last rows, with ridges along the rows, they
+/// are longitudinal valleys between ridges.
+pub fn eroded_exemplar(z: &[f32], size: usize, steps: usize, uplift_floor: f32) -> Vec<f32> {
+    use std::cmp::Reverse;
+    use std::collections::BinaryHeap;
+    let n = size * size;
+    assert_eq!(z.len(), n, "exemplar size");
+    let (lo, hi) = z.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |a, &v| {
+        (a.0.min(v), a.1.max(v))
+    });
+    let span = (hi - lo).max(f32::MIN_POSITIVE);
+    let uplift: Vec<f32> = z
+        .iter()
+        .map(|&v| uplift_floor + (1.0 - uplift_floor) * (v - lo) / span)
+        .collect();
+    // Erodibility × time step, for areas counted in pixels and lengths in pixels.
+    const K_DT: f32 = 0.05;
+    let border = |i: usize| {
+        let y = i / size;
+        y == 0 || y + 1 == size
+    };
+    let key = |v: f32| -> u32 {
+        let b = v.to_bits();
+        if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
+    };
+    let mut h = vec![0.0f32; n];
+    let mut receiver = vec![u32::MAX; n];
+    let mut order = Vec::with_capacity(n);
+    let mut area = vec![0.0f32; n];
+    let mut done = vec![false; n];
+    let mut heap = BinaryHeap::new();
+    for _ in 0..steps {
+        for i in 0..n {
+            h[i] = if border(i) { 0.0 } else { h[i] + uplift[i] };
+        }
+        // Routing: each pixel drains to the one that flooded it.
+        order.clear();
+        done.fill(false);
+        receiver.fill(u32::MAX);
+        for i in (0..n).filter(|&i| border(i)) {
+            done[i] = true;
+            heap.push(Reverse((key(h[i]), i as u32)));
+        }
+        while let Some(Reverse((k, i))) = heap.pop() {
+            let i = i as usize;
+            order.push(i);
+            let (x, y) = ((i % size) as isize, (i / size) as isize);
+            for (dx, dy) in NEIGHBOURS_8 {
+                let (nx, ny) = (x + dx, y + dy);
+                if nx < 0 || ny < 0 || nx >= size as isize || ny >= size as isize {
+                    continue;
+                }
+                let j = ny as usize * size + nx as usize;
+                if !done[j] {
+                    done[j] = true;
+                    receiver[j] = i as u32;
+                    heap.push(Reverse((key(h[j]).max(k), j as u32)));
+                }
+            }
+        }
+        area.fill(1.0);
+        for &i in order.iter().rev() {
+            if let Some(&r) = receiver.get(i)
+                && r != u32::MAX
+            {
+                area[r as usize] += area[i];
+            }
+        }
+        // Implicit incision, receivers first.
+        for &i in &order {
+            let r = receiver[i];
+            if r == u32::MAX {
+                continue;
+            }
+            let r = r as usize;
+            let diagonal = i % size != r % size && i / size != r / size;
+            let dist = if diagonal {
+                std::f32::consts::SQRT_2
+            } else {
+                1.0
+            };
+            let f = K_DT * area[i].sqrt() / dist;
+            h[i] = (h[i] + f * h[r]) / (1.0 + f);
+        }
+    }
+    let (hl, hh) = h.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |a, &v| {
+        (a.0.min(v), a.1.max(v))
+    });
+    let hs = (hh - hl).max(f32::MIN_POSITIVE);
+    h.iter().map(|&v| lo + (v - hl) / hs * span).collect()
+}
+
+const NEIGHBOURS_8: [(isize, isize); 8] = [
+    (-1, -1),
+    (0, -1),
+    (1, -1),
+    (-1, 0),
+    (1, 0),
+    (-1, 1),
+    (0, 1),
+    (1, 1),
+];
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -340,6 +460,57 @@ mod tests {
             let a = e.relief_at(t, 0.5 * t);
             let b = e.relief_at(t + 1e-3, 0.5 * t);
             assert!((a - b).abs() < 5.0, "jump at {t}: {a} vs {b}");
+        }
+    }
+
+    /// Ridged noise is full of hollows ringed by crests; grown drainage leaves next to none,
+    /// and the ridges keep their direction.
+    #[test]
+    fn eroded_exemplars_drain_and_keep_their_grain() {
+        let pits = |z: &[f32]| {
+            // Lifted onto land: the measure counts land only.
+            let land: Vec<f32> = z.iter().map(|v| v + 10_000.0).collect();
+            let s = crate::amplify::valleys::pit_share(&land, 128, 128, 10.0, None);
+            s.pit_cells as f64 / s.land_cells as f64
+        };
+        for deg in [0.0f32, 30.0, 120.0] {
+            let a = deg.to_radians();
+            let raw = synthetic_exemplar(128, a, 14.0, 3000.0, 7);
+            let z = eroded_exemplar(&raw, 128, 150, 0.2);
+            let (before, after) = (pits(&raw), pits(&z));
+            assert!(before > 0.2, "the raw noise has {before:.3} in pits");
+            assert!(
+                after < 0.005,
+                "{deg}°: {after:.4} of the eroded exemplar in pits"
+            );
+            let lo = z.iter().copied().fold(f32::INFINITY, f32::min);
+            let hi = z.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+            let raw_lo = raw.iter().copied().fold(f32::INFINITY, f32::min);
+            let raw_hi = raw.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+            assert!((lo - raw_lo).abs() < 1.0 && (hi - raw_hi).abs() < 1.0);
+            let e = Exemplar::from_elevations("t".into(), 128, 128, &z, 0.2).unwrap();
+            let diff = (e.fold_angle_rad - a).rem_euclid(std::f32::consts::PI);
+            let diff = diff.min(std::f32::consts::PI - diff).to_degrees();
+            // The lookup mirrors the exemplar at its borders: the seams add no pit either.
+            let tiled: Vec<f32> = (0..256)
+                .flat_map(|r| (0..256).map(move |c| (c as f32 - 64.0, r as f32 - 64.0)))
+                .map(|(c, r)| e.relief_at(c, r) + 10_000.0)
+                .collect();
+            let s = crate::amplify::valleys::pit_share(&tiled, 256, 256, 10.0, None);
+            let mirrored = s.pit_cells as f64 / s.land_cells as f64;
+            println!(
+                "{deg}°: pits {before:.3} -> {after:.4}, mirrored {mirrored:.4}, fold found \
+                 {diff:.1}° off"
+            );
+            assert!(
+                mirrored < 0.005,
+                "{deg}°: {mirrored:.4} of the mirrored tiling in pits"
+            );
+            assert!(
+                diff < 15.0,
+                "fold {deg}°: found {}°",
+                e.fold_angle_rad.to_degrees()
+            );
         }
     }
 

@@ -426,7 +426,13 @@ pub(crate) fn write_outputs(sim: &mut Simulation, out: &Path, width: u32) -> Res
     )?;
     let radius_km = sim.params().planet.radius_km;
     let mut files = write_all_maps(&raster, out, radius_km)?;
-    let rivers = RiverNetwork::of(sim.mesh(), &view, sim.network_options());
+    // On the graph the run's relief passes used (shared, not built again).
+    let rivers = RiverNetwork::on_graph(
+        &sim.relief_graph(),
+        &sim.mesh().positions,
+        &view,
+        sim.network_options(),
+    );
     files.extend(write_rivers(&raster, sim.mesh(), &rivers, out, radius_km)?);
     let mut summary = summarize(sim, &view);
     summary.drainage = Some(rivers.summary(sim.mesh()));

@@ -382,6 +382,21 @@ impl Simulation {
     pub fn timings(&self) -> &StepTimings {
         self.app.world().resource::<StepTimings>()
     }
+    /// The sample graph every relief pass works on (see
+    /// [`relief_graph`](crate::systems::relief::network::relief_graph)): the one the relief
+    /// phenomena built for this mesh, shared, or a new one when none is held (a save just
+    /// loaded, the relief phenomena off).
+    pub fn relief_graph(&self) -> std::sync::Arc<crate::systems::relief::graph::ReliefGraph> {
+        let mesh = self.mesh();
+        self.app
+            .world()
+            .get_resource::<crate::systems::relief::ReliefState>()
+            .and_then(|s| s.graph.clone())
+            .filter(|g| g.len() == mesh.len())
+            .unwrap_or_else(|| {
+                std::sync::Arc::new(crate::systems::relief::network::relief_graph(mesh))
+            })
+    }
     /// The ECS world (read). On the GPU backend its crust is as of the last sync (see
     /// [`Self::crust`]).
     pub fn world(&self) -> &World {

@@ -237,14 +237,7 @@ fn ensure_graph(slot: &mut Option<Arc<ReliefGraph>>, mesh: &SphereMesh) -> bool 
     if slot.as_ref().is_some_and(|g| g.len() == mesh.len()) {
         return false;
     }
-    *slot = Some(Arc::new(ReliefGraph::new(
-        &mesh.positions,
-        &mesh.neighbor_start,
-        &mesh.neighbors,
-        Some(&mesh.triangles),
-        Some(&mesh.area_km2),
-        mesh.radius_km,
-    )));
+    *slot = Some(Arc::new(network::relief_graph(mesh)));
     true
 }
 

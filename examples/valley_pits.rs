@@ -7,7 +7,7 @@
 
 use glam::DVec3;
 use tectonic_planets::amplify::valleys::drains_to_sea;
-use tectonic_planets::amplify::{Amplifier, AmplifyOptions, pit_depths};
+use tectonic_planets::amplify::{Amplifier, AmplifyOptions, pit_depths, pit_depths_with_outlets};
 use tectonic_planets::io::export::{GeoGrid, parse_resolution};
 use tectonic_planets::io::rivers::{NetworkOptions, RiverNetwork};
 
@@ -55,6 +55,16 @@ fn main() {
             .1 as usize;
         !open[c]
     });
+    // The sinks of the coarse closed basins (their water ends there, as at the sea): every
+    // pixel whose heaviest corner is one.
+    let sink: Vec<bool> = g.sample(&|d: DVec3| {
+        let q = plain.query(d);
+        let c = [(q.w0, q.c0), (q.w1, q.c1), (q.w2, q.c2)]
+            .into_iter()
+            .fold((f32::MIN, 0), |a, x| if x.0 > a.0 { x } else { a })
+            .1 as usize;
+        !net.drainage.ocean[c] && net.drainage.receiver[c] as usize == c
+    });
     for (name, amp) in [("no valleys", &plain), ("valleys", &carved)] {
         let z = g.sample(&|d: DVec3| amp.elevation_m(d));
         let mut depths = Vec::new();
@@ -72,6 +82,12 @@ fn main() {
             write_pits(path, &z, &depths, w, h, depth);
         }
         let pct = |c: [usize; 2]| 100.0 * c[1] as f64 / c[0].max(1) as f64;
+        let mut sink_depths = Vec::new();
+        let s = pit_depths_with_outlets(&z, w, h, depth, None, Some(&sink), &mut sink_depths);
+        println!(
+            "{name}: with the coarse closed basins' sinks as outlets, land in pits {:.2}%",
+            100.0 * s.share()
+        );
         println!(
             "{name}: {w}x{h}, land in pits deeper than {depth} m {:.2}%; on land draining to the sea ({:.1}% of the land) {:.2}%, in the coarse closed basins {:.2}%",
             pct([n[0][0] + n[1][0], n[0][1] + n[1][1]]),

@@ -18,7 +18,7 @@ pub use procedural::{
     AmplifyQuery, AmplifyUniform, AmplifyVertex, KIND_ANDEAN, KIND_HIMALAYAN, KIND_OCEAN,
     KIND_PLAIN, MAX_RELIEF_M, amplify_cpu, amplify_point,
 };
-pub use valleys::{PitShare, Valleys, pit_depths, pit_share};
+pub use valleys::{PitShare, Valleys, pit_depths, pit_depths_with_outlets, pit_share};
 
 /// Random stream of the primitives' offsets.
 const STREAM_OFFSET: u64 = 900;

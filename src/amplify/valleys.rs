@@ -1019,6 +1019,21 @@ pub fn pit_depths(
     skip: Option<&[bool]>,
     depth_m: &mut Vec<f32>,
 ) -> PitShare {
+    pit_depths_with_outlets(z, width, height, min_depth_m, skip, None, depth_m)
+}
+
+/// [`pit_depths`] with more outlets than the sea and the border: cells with `outlets[i]` set
+/// drain wherever they are (the sinks of closed basins the coarse network records, say: water
+/// that reaches them has reached its end, as at the sea).
+pub fn pit_depths_with_outlets(
+    z: &[f32],
+    width: usize,
+    height: usize,
+    min_depth_m: f32,
+    skip: Option<&[bool]>,
+    outlets: Option<&[bool]>,
+    depth_m: &mut Vec<f32>,
+) -> PitShare {
     use std::cmp::Reverse;
     use std::collections::BinaryHeap;
     let n = width * height;
@@ -1034,7 +1049,8 @@ pub fn pit_depths(
     for i in 0..n {
         let (x, y) = (i % width, i / width);
         let sea = !(z[i] > 0.0);
-        if sea || x == 0 || y == 0 || x + 1 == width || y + 1 == height {
+        let outlet = outlets.is_some_and(|o| o[i]);
+        if sea || outlet || x == 0 || y == 0 || x + 1 == width || y + 1 == height {
             let v = if sea { 0.0f32.min(z[i]) } else { z[i] };
             let v = if v.is_nan() { 0.0 } else { v };
             level[i] = v;
@@ -1104,5 +1120,10 @@ mod tests {
         // Skipped cells are not counted.
         let skip = vec![true; w * h];
         assert_eq!(pit_share(&bowl, w, h, 10.0, Some(&skip)).land_cells, 0);
+        // An outlet at the bottom of the bowl (a closed basin's sink) drains it.
+        let mut outlet = vec![false; w * h];
+        outlet[15 * w + 20] = true;
+        let drained = pit_depths_with_outlets(&bowl, w, h, 10.0, None, Some(&outlet), &mut vec![]);
+        assert_eq!(drained.pit_cells, 0, "{drained:?}");
     }
 }

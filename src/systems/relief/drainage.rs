@@ -332,26 +332,21 @@ impl Drainage {
                         let (mut r, mut d) = (i as u32, 0.0f32);
                         if !oc[i] {
                             let hi = h[i];
-                            let mut best = 0.0f32;
                             let (a, b) = (
                                 g.neighbor_start[i] as usize,
                                 g.neighbor_start[i + 1] as usize,
                             );
                             let (nb, inv) = (&g.neighbors[a..b], &g.inv_edge_km[a..b]);
-                            let mut best_k = 0;
+                            let mut down = Downhill::new();
                             for k in 0..nb.len() {
                                 // inv = 0 for degenerate edges: slope 0, never chosen.
                                 let s = (hi - h[nb[k] as usize]) * inv[k];
-                                if s > best {
-                                    best = s;
-                                    best_k = k;
-                                }
+                                down.offer(nb[k], s, g.edge_km[a + k]);
                             }
-                            // The strict `>` keeps the first of equal slopes, so `best_k` is
-                            // the first edge to the receiver.
-                            if best > 0.0 {
-                                r = nb[best_k];
-                                d = g.edge_km[a + best_k];
+                            // The first of equal slopes is the steepest.
+                            if let Some((j, km)) = down.pick(i) {
+                                r = j;
+                                d = km;
                             }
                         }
                         rs[k] = r;
@@ -411,20 +406,16 @@ impl Drainage {
                 if r0 != i && level(r0) < li {
                     continue;
                 }
-                let (mut r, mut d, mut best) = (i as u32, 0.0f32, 0.0f32);
+                let mut down = Downhill::new();
                 for e in g.edges(i) {
                     let j = g.neighbors[e] as usize;
                     let dist = g.edge_km[e];
                     if dist <= 0.0 {
                         continue;
                     }
-                    let s = (li - level(j)) / dist;
-                    if s > best {
-                        best = s;
-                        r = j as u32;
-                        d = dist;
-                    }
+                    down.offer(j as u32, (li - level(j)) / dist, dist);
                 }
+                let (r, d) = down.pick(i).unwrap_or((i as u32, 0.0));
                 self.receiver[i] = r;
                 self.receiver_km[i] = d;
             }
@@ -692,7 +683,10 @@ impl Drainage {
             }
             let li = self.water_level_km[i];
             let pa = self.parent[i];
-            if k < lake_n || li > self.h[i] {
+            // The lake drains along its flood. A hollow beyond it (its level raised to its rim by
+            // the flood, above its floor) drains over its rim too, but by the water surface,
+            // not the flood's parents, which run in straight parallel lines across its floor.
+            if k < lake_n {
                 self.receiver[i] = pa;
                 self.receiver_km[i] = edge_to(g, i, pa);
                 continue;
@@ -702,20 +696,16 @@ impl Drainage {
             if self.mark[r0] == CLOSED && self.water_level_km[r0] < li && r0 != i && before(r0) {
                 continue;
             }
-            let (mut r, mut d, mut best) = (pa, edge_to(g, i, pa), 0.0f32);
+            let mut down = Downhill::new();
             for e in g.edges(i) {
                 let j = g.neighbors[e] as usize;
                 let dist = g.edge_km[e];
                 if dist <= 0.0 || self.mark[j] != CLOSED || !before(j) {
                     continue;
                 }
-                let sl = (li - self.water_level_km[j]) / dist;
-                if sl > best {
-                    best = sl;
-                    r = j as u32;
-                    d = dist;
-                }
+                down.offer(j as u32, (li - self.water_level_km[j]) / dist, dist);
             }
+            let (r, d) = down.pick(i).unwrap_or_else(|| (pa, edge_to(g, i, pa)));
             self.receiver[i] = r;
             self.receiver_km[i] = d;
         }
@@ -923,6 +913,89 @@ pub struct SeaMaskScratch {
 
 const OPEN: u8 = 1;
 const SEA: u8 = 2;
+
+/// Steepest slope (m/m) under which a land sample counts as lying on a plain: its receiver is
+/// drawn among the lower neighbours nearly as steep (see [`Downhill::pick`]). Lowland rivers
+/// fall 0.1–1 m per km.
+pub const PLAIN_SLOPE: f32 = 1.0e-3;
+
+/// Share of the steepest slope a neighbour must offer to be a plain sample's receiver.
+pub const PLAIN_SHARE: f32 = 0.5;
+
+/// The downhill neighbours of one sample, gathered to choose its receiver.
+struct Downhill {
+    /// (neighbour, slope m/m, edge km), slope > 0; at most [`Downhill::CAP`] kept.
+    cands: [(u32, f32, f32); Downhill::CAP],
+    len: usize,
+    /// Index in `cands` of the steepest (the first of equal slopes).
+    best: usize,
+}
+
+impl Downhill {
+    const CAP: usize = 16;
+
+    fn new() -> Self {
+        Self {
+            cands: [(0, 0.0, 0.0); Self::CAP],
+            len: 0,
+            best: 0,
+        }
+    }
+
+    /// Offers neighbour `j` at `slope` over `km`; only slopes above zero count.
+    #[inline]
+    fn offer(&mut self, j: u32, slope: f32, km: f32) {
+        if !(slope > 0.0) {
+            return;
+        }
+        if self.len == Self::CAP {
+            // More neighbours than the mesh has: keep the steepest only.
+            if slope > self.cands[self.best].1 {
+                self.cands[self.best] = (j, slope, km);
+            }
+            return;
+        }
+        if self.len == 0 || slope > self.cands[self.best].1 {
+            self.best = self.len;
+        }
+        self.cands[self.len] = (j, slope, km);
+        self.len += 1;
+    }
+
+    /// The receiver of sample `i`, (neighbour, edge km), or `None` with no lower neighbour: the
+    /// steepest descent, except on a plain (steepest slope under [`PLAIN_SLOPE`]), where it is
+    /// drawn with weights in proportion to the slope among the neighbours at least
+    /// [`PLAIN_SHARE`] as steep, by a hash of the sample (the same draw every step). On a tilted
+    /// plane (a basin's filled floor tilted by isostasy), steepest descent sends every sample
+    /// the same way, and the rivers come out as parallel straight lines; drawn like this they
+    /// wander and join, as random-walk networks do (Scheidegger 1967).
+    fn pick(&self, i: usize) -> Option<(u32, f32)> {
+        if self.len == 0 {
+            return None;
+        }
+        let (bj, best, bkm) = self.cands[self.best];
+        if best >= PLAIN_SLOPE {
+            return Some((bj, bkm));
+        }
+        let floor = PLAIN_SHARE * best;
+        let c = &self.cands[..self.len];
+        let total: f32 = c.iter().map(|x| x.1).filter(|&s| s >= floor).sum();
+        let u = crate::random::unit_f64(crate::random::hash3(PLAIN_SEED, 0, i as u64)) as f32;
+        let mut left = u * total;
+        for &(j, s, km) in c {
+            if s >= floor {
+                if left < s {
+                    return Some((j, km));
+                }
+                left -= s;
+            }
+        }
+        Some((bj, bkm))
+    }
+}
+
+/// Hash stream of [`Downhill::pick`].
+const PLAIN_SEED: u64 = 0x706c_6169_6e73;
 
 /// [`sea_mask`] with an explicit scratch.
 ///

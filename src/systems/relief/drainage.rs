@@ -6,7 +6,12 @@
 //! 1. Receivers: each land sample drains to the neighbour of steepest descent
 //!    S = (h_i − h_j) / d_ij (m/m; d_ij great-circle km); ocean samples stand at sea level (0 km)
 //!    for this purpose, so a coastal sample drains to the sea rather than into a trench. This is
-//!    the D8/"steepest descent" rule of O'Callaghan & Mark (1984) on an irregular graph.
+//!    the D8/"steepest descent" rule of O'Callaghan & Mark (1984) on an irregular graph. On a
+//!    plain (steepest slope under [`PLAIN_SLOPE`], 1 m/km) the receiver is drawn instead among
+//!    the lower neighbours at least [`PLAIN_SHARE`] as steep, in proportion to the slope, by a
+//!    hash of the sample: steepest descent on a tilted plain sends every sample the same way,
+//!    in parallel straight lines; drawn, the streams wander and join (Scheidegger 1967). The
+//!    same draw picks receivers on the water surface below.
 //! 2. Pits (land samples with no strictly lower neighbour) and the basins draining to them are
 //!    found by walking receivers. Samples whose receiver chain reaches the ocean already have a
 //!    monotone path to the sea, so their spill level equals their elevation; a
@@ -34,7 +39,10 @@
 //!    its balance is *closed*: its catchment is taken off everything below its outlet, its
 //!    basin (everything draining through the outlet) is flooded again from its lowest sample,
 //!    which becomes a sink, and the lake is the first samples of that flood up to the balance
-//!    area, at the level of the last of them. Stack and areas are then rebuilt.
+//!    area, at the level of the last of them. Stack and areas are then rebuilt. Hollows of the
+//!    basin beyond the lake stay dry; their water goes over their rims to the lake, each sample
+//!    to a neighbour the flood reached before it, lower on the flood's water surface (not the
+//!    flood's own parents, which cross a hollow's floor in straight parallel lines).
 //!
 //! A land region with no route to any ocean sample (e.g. a planet without sea) drains to its
 //! lowest sample, which becomes an endorheic sink (receiver = itself, recorded in `sinks`), as
@@ -337,16 +345,23 @@ impl Drainage {
                                 g.neighbor_start[i + 1] as usize,
                             );
                             let (nb, inv) = (&g.neighbors[a..b], &g.inv_edge_km[a..b]);
-                            let mut down = Downhill::new();
+                            // inv = 0 for degenerate edges: slope 0, never chosen.
+                            let slope = |k: usize| (hi - h[nb[k] as usize]) * inv[k];
+                            let (mut best, mut best_k) = (0.0f32, 0);
                             for k in 0..nb.len() {
-                                // inv = 0 for degenerate edges: slope 0, never chosen.
-                                let s = (hi - h[nb[k] as usize]) * inv[k];
-                                down.offer(nb[k], s, g.edge_km[a + k]);
+                                let s = slope(k);
+                                // The strict `>` keeps the first of equal slopes.
+                                if s > best {
+                                    best = s;
+                                    best_k = k;
+                                }
                             }
-                            // The first of equal slopes is the steepest.
-                            if let Some((j, km)) = down.pick(i) {
-                                r = j;
-                                d = km;
+                            if best > 0.0 {
+                                if best < PLAIN_SLOPE {
+                                    best_k = plain_draw(i, (best, best_k), nb.len(), slope);
+                                }
+                                r = nb[best_k];
+                                d = g.edge_km[a + best_k];
                             }
                         }
                         rs[k] = r;
@@ -406,16 +421,13 @@ impl Drainage {
                 if r0 != i && level(r0) < li {
                     continue;
                 }
-                let mut down = Downhill::new();
-                for e in g.edges(i) {
-                    let j = g.neighbors[e] as usize;
-                    let dist = g.edge_km[e];
-                    if dist <= 0.0 {
-                        continue;
-                    }
-                    down.offer(j as u32, (li - level(j)) / dist, dist);
-                }
-                let (r, d) = down.pick(i).unwrap_or((i as u32, 0.0));
+                let cands = || {
+                    g.edges(i).filter(|&e| g.edge_km[e] > 0.0).map(|e| {
+                        let j = g.neighbors[e] as usize;
+                        (j as u32, (li - level(j)) / g.edge_km[e], g.edge_km[e])
+                    })
+                };
+                let (r, d) = pick_receiver(i, cands).unwrap_or((i as u32, 0.0));
                 self.receiver[i] = r;
                 self.receiver_km[i] = d;
             }
@@ -696,16 +708,19 @@ impl Drainage {
             if self.mark[r0] == CLOSED && self.water_level_km[r0] < li && r0 != i && before(r0) {
                 continue;
             }
-            let mut down = Downhill::new();
-            for e in g.edges(i) {
-                let j = g.neighbors[e] as usize;
-                let dist = g.edge_km[e];
-                if dist <= 0.0 || self.mark[j] != CLOSED || !before(j) {
-                    continue;
-                }
-                down.offer(j as u32, (li - self.water_level_km[j]) / dist, dist);
-            }
-            let (r, d) = down.pick(i).unwrap_or_else(|| (pa, edge_to(g, i, pa)));
+            let cands = || {
+                g.edges(i)
+                    .filter(|&e| {
+                        let j = g.neighbors[e] as usize;
+                        g.edge_km[e] > 0.0 && self.mark[j] == CLOSED && before(j)
+                    })
+                    .map(|e| {
+                        let j = g.neighbors[e] as usize;
+                        let dist = g.edge_km[e];
+                        (j as u32, (li - self.water_level_km[j]) / dist, dist)
+                    })
+            };
+            let (r, d) = pick_receiver(i, cands).unwrap_or_else(|| (pa, edge_to(g, i, pa)));
             self.receiver[i] = r;
             self.receiver_km[i] = d;
         }
@@ -915,86 +930,93 @@ const OPEN: u8 = 1;
 const SEA: u8 = 2;
 
 /// Steepest slope (m/m) under which a land sample counts as lying on a plain: its receiver is
-/// drawn among the lower neighbours nearly as steep (see [`Downhill::pick`]). Lowland rivers
+/// drawn among the lower neighbours nearly as steep (see [`pick_receiver`]). Lowland rivers
 /// fall 0.1–1 m per km.
 pub const PLAIN_SLOPE: f32 = 1.0e-3;
 
 /// Share of the steepest slope a neighbour must offer to be a plain sample's receiver.
 pub const PLAIN_SHARE: f32 = 0.5;
 
-/// The downhill neighbours of one sample, gathered to choose its receiver.
-struct Downhill {
-    /// (neighbour, slope m/m, edge km), slope > 0; at most [`Downhill::CAP`] kept.
-    cands: [(u32, f32, f32); Downhill::CAP],
+/// The receiver of sample `i` among the neighbours `cands()` lists as (neighbour, slope m/m,
+/// edge km), or `None` when none lies lower (slope > 0): the steepest descent (the first of
+/// equal slopes), except on a plain (steepest slope under [`PLAIN_SLOPE`]), where it is drawn
+/// with weights in proportion to the slope among the neighbours at least [`PLAIN_SHARE`] as
+/// steep, by a hash of the sample (the same draw every step). On a tilted plane (a basin's
+/// filled floor tilted by isostasy), steepest descent sends every sample the same way, and the
+/// rivers come out as parallel straight lines; drawn like this they wander and join, as
+/// random-walk networks do (Scheidegger 1967). `cands` is called again for the draw (no buffer:
+/// this runs for every land sample).
+#[inline]
+fn pick_receiver<I: Iterator<Item = (u32, f32, f32)>>(
+    i: usize,
+    cands: impl Fn() -> I,
+) -> Option<(u32, f32)> {
+    let mut best: Option<(u32, f32, f32)> = None;
+    for (j, s, km) in cands() {
+        if s > 0.0 && best.is_none_or(|b| s > b.1) {
+            best = Some((j, s, km));
+        }
+    }
+    let (bj, bs, bkm) = best?;
+    if bs >= PLAIN_SLOPE {
+        return Some((bj, bkm));
+    }
+    let floor = PLAIN_SHARE * bs;
+    let eligible = |s: f32| s > 0.0 && s >= floor;
+    let total: f32 = cands().map(|c| c.1).filter(|&s| eligible(s)).sum();
+    let mut left = plain_hash(i) * total;
+    for (j, s, km) in cands() {
+        if eligible(s) {
+            if left < s {
+                return Some((j, km));
+            }
+            left -= s;
+        }
+    }
+    Some((bj, bkm))
+}
+
+/// The draw of [`pick_receiver`] for a sample whose steepest slope `best` (> 0, under
+/// [`PLAIN_SLOPE`]; the first of its neighbours that steep is at `best_k`) is known: its `len`
+/// neighbours' slopes are `slope(k)`. Returns the chosen neighbour's position (the one
+/// [`pick_receiver`] gives).
+#[inline]
+fn plain_draw(
+    i: usize,
+    (best, best_k): (f32, usize),
     len: usize,
-    /// Index in `cands` of the steepest (the first of equal slopes).
-    best: usize,
+    slope: impl Fn(usize) -> f32,
+) -> usize {
+    let floor = PLAIN_SHARE * best;
+    let eligible = |s: f32| s > 0.0 && s >= floor;
+    let mut total = 0.0f32;
+    for k in 0..len {
+        let s = slope(k);
+        if eligible(s) {
+            total += s;
+        }
+    }
+    let mut left = plain_hash(i) * total;
+    for k in 0..len {
+        let s = slope(k);
+        if eligible(s) {
+            if left < s {
+                return k;
+            }
+            left -= s;
+        }
+    }
+    // Rounding left nothing drawn: the steepest.
+    best_k
 }
 
-impl Downhill {
-    const CAP: usize = 16;
-
-    fn new() -> Self {
-        Self {
-            cands: [(0, 0.0, 0.0); Self::CAP],
-            len: 0,
-            best: 0,
-        }
-    }
-
-    /// Offers neighbour `j` at `slope` over `km`; only slopes above zero count.
-    #[inline]
-    fn offer(&mut self, j: u32, slope: f32, km: f32) {
-        if !(slope > 0.0) {
-            return;
-        }
-        if self.len == Self::CAP {
-            // More neighbours than the mesh has: keep the steepest only.
-            if slope > self.cands[self.best].1 {
-                self.cands[self.best] = (j, slope, km);
-            }
-            return;
-        }
-        if self.len == 0 || slope > self.cands[self.best].1 {
-            self.best = self.len;
-        }
-        self.cands[self.len] = (j, slope, km);
-        self.len += 1;
-    }
-
-    /// The receiver of sample `i`, (neighbour, edge km), or `None` with no lower neighbour: the
-    /// steepest descent, except on a plain (steepest slope under [`PLAIN_SLOPE`]), where it is
-    /// drawn with weights in proportion to the slope among the neighbours at least
-    /// [`PLAIN_SHARE`] as steep, by a hash of the sample (the same draw every step). On a tilted
-    /// plane (a basin's filled floor tilted by isostasy), steepest descent sends every sample
-    /// the same way, and the rivers come out as parallel straight lines; drawn like this they
-    /// wander and join, as random-walk networks do (Scheidegger 1967).
-    fn pick(&self, i: usize) -> Option<(u32, f32)> {
-        if self.len == 0 {
-            return None;
-        }
-        let (bj, best, bkm) = self.cands[self.best];
-        if best >= PLAIN_SLOPE {
-            return Some((bj, bkm));
-        }
-        let floor = PLAIN_SHARE * best;
-        let c = &self.cands[..self.len];
-        let total: f32 = c.iter().map(|x| x.1).filter(|&s| s >= floor).sum();
-        let u = crate::random::unit_f64(crate::random::hash3(PLAIN_SEED, 0, i as u64)) as f32;
-        let mut left = u * total;
-        for &(j, s, km) in c {
-            if s >= floor {
-                if left < s {
-                    return Some((j, km));
-                }
-                left -= s;
-            }
-        }
-        Some((bj, bkm))
-    }
+/// A uniform draw in [0, 1) for plain sample `i`, the same every step.
+#[inline]
+fn plain_hash(i: usize) -> f32 {
+    crate::random::unit_f64(crate::random::hash3(PLAIN_SEED, 0, i as u64)) as f32
 }
 
-/// Hash stream of [`Downhill::pick`].
+/// Hash stream of [`pick_receiver`].
 const PLAIN_SEED: u64 = 0x706c_6169_6e73;
 
 /// [`sea_mask`] with an explicit scratch.

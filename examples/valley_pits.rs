@@ -47,22 +47,18 @@ fn main() {
     let g = GeoGrid::region(b[0], b[1], b[2], b[3], px).expect("region");
     let (w, h) = (g.width as usize, g.height as usize);
     // A pixel belongs to the sample of its triangle's heaviest corner.
-    let closed: Vec<bool> = g.sample(&|d: DVec3| {
+    let corner = |d: DVec3| {
         let q = plain.query(d);
-        let c = [(q.w0, q.c0), (q.w1, q.c1), (q.w2, q.c2)]
+        [(q.w0, q.c0), (q.w1, q.c1), (q.w2, q.c2)]
             .into_iter()
             .fold((f32::MIN, 0), |a, x| if x.0 > a.0 { x } else { a })
-            .1 as usize;
-        !open[c]
-    });
+            .1 as usize
+    };
+    let closed: Vec<bool> = g.sample(&|d: DVec3| !open[corner(d)]);
     // The sinks of the coarse closed basins (their water ends there, as at the sea): every
     // pixel whose heaviest corner is one.
     let sink: Vec<bool> = g.sample(&|d: DVec3| {
-        let q = plain.query(d);
-        let c = [(q.w0, q.c0), (q.w1, q.c1), (q.w2, q.c2)]
-            .into_iter()
-            .fold((f32::MIN, 0), |a, x| if x.0 > a.0 { x } else { a })
-            .1 as usize;
+        let c = corner(d);
         !net.drainage.ocean[c] && net.drainage.receiver[c] as usize == c
     });
     for (name, amp) in [("no valleys", &plain), ("valleys", &carved)] {

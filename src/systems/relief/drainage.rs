@@ -358,7 +358,8 @@ impl Drainage {
                             }
                             if best > 0.0 {
                                 if best < PLAIN_SLOPE {
-                                    best_k = plain_draw(i, (best, best_k), nb.len(), slope);
+                                    let slopes = || (0..nb.len()).map(slope);
+                                    best_k = plain_draw(i, (best, best_k), slopes);
                                 }
                                 r = nb[best_k];
                                 d = g.edge_km[a + best_k];
@@ -940,65 +941,43 @@ pub const PLAIN_SHARE: f32 = 0.5;
 /// The receiver of sample `i` among the neighbours `cands()` lists as (neighbour, slope m/m,
 /// edge km), or `None` when none lies lower (slope > 0): the steepest descent (the first of
 /// equal slopes), except on a plain (steepest slope under [`PLAIN_SLOPE`]), where it is drawn
-/// with weights in proportion to the slope among the neighbours at least [`PLAIN_SHARE`] as
-/// steep, by a hash of the sample (the same draw every step). On a tilted plane (a basin's
-/// filled floor tilted by isostasy), steepest descent sends every sample the same way, and the
-/// rivers come out as parallel straight lines; drawn like this they wander and join, as
-/// random-walk networks do (Scheidegger 1967). `cands` is called again for the draw (no buffer:
-/// this runs for every land sample).
+/// by [`plain_draw`]. `cands` is called again for the draw (no buffer).
 #[inline]
 fn pick_receiver<I: Iterator<Item = (u32, f32, f32)>>(
     i: usize,
     cands: impl Fn() -> I,
 ) -> Option<(u32, f32)> {
-    let mut best: Option<(u32, f32, f32)> = None;
-    for (j, s, km) in cands() {
+    let mut best: Option<(usize, f32)> = None;
+    for (k, (_, s, _)) in cands().enumerate() {
         if s > 0.0 && best.is_none_or(|b| s > b.1) {
-            best = Some((j, s, km));
+            best = Some((k, s));
         }
     }
-    let (bj, bs, bkm) = best?;
-    if bs >= PLAIN_SLOPE {
-        return Some((bj, bkm));
+    let (mut k, bs) = best?;
+    if bs < PLAIN_SLOPE {
+        k = plain_draw(i, (bs, k), || cands().map(|c| c.1));
     }
-    let floor = PLAIN_SHARE * bs;
-    let eligible = |s: f32| s > 0.0 && s >= floor;
-    let total: f32 = cands().map(|c| c.1).filter(|&s| eligible(s)).sum();
-    let mut left = plain_hash(i) * total;
-    for (j, s, km) in cands() {
-        if eligible(s) {
-            if left < s {
-                return Some((j, km));
-            }
-            left -= s;
-        }
-    }
-    Some((bj, bkm))
+    cands().nth(k).map(|(j, _, km)| (j, km))
 }
 
-/// The draw of [`pick_receiver`] for a sample whose steepest slope `best` (> 0, under
-/// [`PLAIN_SLOPE`]; the first of its neighbours that steep is at `best_k`) is known: its `len`
-/// neighbours' slopes are `slope(k)`. Returns the chosen neighbour's position (the one
-/// [`pick_receiver`] gives).
+/// The receiver of plain sample `i`, whose steepest slope to a lower neighbour is `best` (> 0,
+/// under [`PLAIN_SLOPE`]; the first neighbour that steep is at position `best_k` of `slopes()`):
+/// drawn with weights in proportion to the slope among the neighbours at least [`PLAIN_SHARE`]
+/// as steep, by a hash of the sample (the same draw every step). Returns the chosen position.
+/// On a tilted plane (a basin's filled floor tilted by isostasy), steepest descent sends every
+/// sample the same way, and the rivers come out as parallel straight lines; drawn like this
+/// they wander and join, as random-walk networks do (Scheidegger 1967).
 #[inline]
-fn plain_draw(
+fn plain_draw<S: Iterator<Item = f32>>(
     i: usize,
     (best, best_k): (f32, usize),
-    len: usize,
-    slope: impl Fn(usize) -> f32,
+    slopes: impl Fn() -> S,
 ) -> usize {
     let floor = PLAIN_SHARE * best;
     let eligible = |s: f32| s > 0.0 && s >= floor;
-    let mut total = 0.0f32;
-    for k in 0..len {
-        let s = slope(k);
-        if eligible(s) {
-            total += s;
-        }
-    }
+    let total: f32 = slopes().filter(|&s| eligible(s)).sum();
     let mut left = plain_hash(i) * total;
-    for k in 0..len {
-        let s = slope(k);
+    for (k, s) in slopes().enumerate() {
         if eligible(s) {
             if left < s {
                 return k;
@@ -1016,7 +995,7 @@ fn plain_hash(i: usize) -> f32 {
     crate::random::unit_f64(crate::random::hash3(PLAIN_SEED, 0, i as u64)) as f32
 }
 
-/// Hash stream of [`pick_receiver`].
+/// Hash stream of [`plain_draw`].
 const PLAIN_SEED: u64 = 0x706c_6169_6e73;
 
 /// [`sea_mask`] with an explicit scratch.

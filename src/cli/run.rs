@@ -547,6 +547,8 @@ pub(crate) fn generate(a: GenerateArgs) -> Result<()> {
             a.width,
         ));
     }
+    // The run is over: its work areas go before the maps are made (the peak of memory).
+    sim.release_scratch();
     // The maps, then the exports, then the save: a failure of one still leaves the others.
     let mut failures: Vec<anyhow::Error> = Vec::new();
     let mut files = write_outputs(&mut sim, &a.out, a.width).unwrap_or_else(|e| {

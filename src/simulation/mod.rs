@@ -382,6 +382,31 @@ impl Simulation {
     pub fn timings(&self) -> &StepTimings {
         self.app.world().resource::<StepTimings>()
     }
+    /// Frees what the steps keep between them only to save allocations: the resampling's work
+    /// area, the relief passes' and the climate's, and the last step's drainage network. The
+    /// next step builds them again, with the same results (a run that releases them halfway
+    /// gives the bits of one that does not); `generate` calls it before writing its maps, to
+    /// lower the peak of memory.
+    pub fn release_scratch(&mut self) {
+        let world = self.app.world_mut();
+        if let Some(mut w) = world.get_resource_mut::<resample::ResampleWork>()
+            && !w.active
+        {
+            w.next = Crust::default();
+            w.sources = Vec::new();
+            w.gaps = Vec::new();
+        }
+        if let Some(mut r) = world.get_resource_mut::<crate::systems::relief::ReliefState>() {
+            r.release_scratch();
+        }
+        if let Some(mut c) = world.get_resource_mut::<crate::systems::relief::ClimateState>() {
+            c.release_scratch();
+        }
+        if let Some(mut n) = world.get_resource_mut::<crate::systems::relief::DrainageNetwork>() {
+            n.drainage = Default::default();
+            n.built = false;
+        }
+    }
     /// The sample graph every relief pass works on (see
     /// [`relief_graph`](crate::systems::relief::network::relief_graph)): the one the relief
     /// phenomena built for this mesh, shared, or a new one when none is held (a save just

@@ -223,6 +223,17 @@ pub struct ReliefState {
 }
 
 impl ReliefState {
+    /// Frees the relief passes' work areas (rebuilt at their next use): see
+    /// [`crate::simulation::Simulation::release_scratch`]. Keeps the graph, the caches and what
+    /// the summary reads (the trench depths, the sea level, the deflection).
+    pub fn release_scratch(&mut self) {
+        self.spl = StreamPowerScratch::default();
+        self.diffusion = DiffusionScratch::default();
+        self.router = SedimentRouter::default();
+        self.sea = SeaMaskScratch::default();
+        self.fill = Vec::new();
+    }
+
     /// Deflection w of the lithosphere under the continents' regional load (km, positive
     /// down) from the last isostasy pass: the flexural moat beside a continent at sea, before
     /// the `isostasy.max_flexural_support_km` clamp.
@@ -346,6 +357,16 @@ pub struct ClimateState {
     /// How long the last search took on its thread, taken by the drainage's timings (the
     /// climate set's own time does not hold it: the search runs inside the drainage's).
     pub last_search: Option<std::time::Duration>,
+}
+
+impl ClimateState {
+    /// Frees the search's work area (rebuilt at its next run); none may be running (one runs
+    /// only within a step).
+    pub fn release_scratch(&mut self) {
+        if self.pending.is_none() {
+            self.scratch = climate::ClimateScratch::default();
+        }
+    }
 }
 
 /// What the climate's search hands back: the field, its scratch and the time it took, or its

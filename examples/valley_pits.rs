@@ -47,20 +47,20 @@ fn main() {
     let g = GeoGrid::region(b[0], b[1], b[2], b[3], px).expect("region");
     let (w, h) = (g.width as usize, g.height as usize);
     // A pixel belongs to the sample of its triangle's heaviest corner.
-    let corner = |d: DVec3| {
+    let corner: Vec<usize> = g.sample(&|d: DVec3| {
         let q = plain.query(d);
         [(q.w0, q.c0), (q.w1, q.c1), (q.w2, q.c2)]
             .into_iter()
             .fold((f32::MIN, 0), |a, x| if x.0 > a.0 { x } else { a })
             .1 as usize
-    };
-    let closed: Vec<bool> = g.sample(&|d: DVec3| !open[corner(d)]);
+    });
+    let closed: Vec<bool> = corner.iter().map(|&c| !open[c]).collect();
     // The sinks of the coarse closed basins (their water ends there, as at the sea): every
     // pixel whose heaviest corner is one.
-    let sink: Vec<bool> = g.sample(&|d: DVec3| {
-        let c = corner(d);
-        !net.drainage.ocean[c] && net.drainage.receiver[c] as usize == c
-    });
+    let sink: Vec<bool> = corner
+        .iter()
+        .map(|&c| !net.drainage.ocean[c] && net.drainage.receiver[c] as usize == c)
+        .collect();
     for (name, amp) in [("no valleys", &plain), ("valleys", &carved)] {
         let z = g.sample(&|d: DVec3| amp.elevation_m(d));
         let mut depths = Vec::new();

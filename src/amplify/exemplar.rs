@@ -347,10 +347,7 @@ pub fn eroded_exemplar(z: &[f32], size: usize, steps: usize, uplift_floor: f32) 
         let y = i / size;
         y == 0 || y + 1 == size
     };
-    let key = |v: f32| -> u32 {
-        let b = v.to_bits();
-        if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
-    };
+    let key = crate::systems::relief::drainage::order_bits;
     let mut h = vec![0.0f32; n];
     let mut receiver = vec![u32::MAX; n];
     let mut order = Vec::with_capacity(n);
@@ -388,9 +385,8 @@ pub fn eroded_exemplar(z: &[f32], size: usize, steps: usize, uplift_floor: f32) 
         }
         area.fill(1.0);
         for &i in order.iter().rev() {
-            if let Some(&r) = receiver.get(i)
-                && r != u32::MAX
-            {
+            let r = receiver[i];
+            if r != u32::MAX {
                 area[r as usize] += area[i];
             }
         }

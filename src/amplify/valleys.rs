@@ -1038,11 +1038,7 @@ pub fn pit_depths_with_outlets(
     use std::collections::BinaryHeap;
     let n = width * height;
     assert_eq!(z.len(), n, "heightmap size");
-    let key = |v: f32| -> u32 {
-        // Order-preserving bits of an f32.
-        let b = v.to_bits();
-        if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
-    };
+    let key = crate::systems::relief::drainage::order_bits;
     let mut level = vec![f32::NAN; n];
     let mut done = vec![false; n];
     let mut heap = BinaryHeap::new();

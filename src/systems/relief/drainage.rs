@@ -144,9 +144,10 @@ fn rain_at(precipitation: Option<&[f32]>, i: usize) -> f64 {
         .max(0.0) as f64
 }
 
-/// Key that orders f32 values totally (as `f32::total_cmp`) when compared as u32.
+/// Key that orders f32 values totally (as `f32::total_cmp`) when compared as u32 (the priority
+/// floods' keys, here and in the sediment router, the pit measure and the exemplars' drainage).
 #[inline]
-fn order_bits(x: f32) -> u32 {
+pub(crate) fn order_bits(x: f32) -> u32 {
     let b = x.to_bits();
     if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
 }

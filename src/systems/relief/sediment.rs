@@ -41,7 +41,7 @@ use std::collections::BinaryHeap;
 
 use rayon::prelude::*;
 
-use super::drainage::Drainage;
+use super::drainage::{Drainage, order_bits};
 use super::graph::ReliefGraph;
 
 /// Parameters of the marine deposition profile. Depths are positive km below sea level.
@@ -173,12 +173,6 @@ struct LandPond<'a> {
     /// Whether the pond may overflow at a lower sample that drains elsewhere (else what is
     /// left is laid on the pond as a blanket).
     overflow: bool,
-}
-
-#[inline]
-fn order_bits(x: f32) -> u32 {
-    let b = x.to_bits();
-    if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
 }
 
 /// Most samples one pond may grow to before the rest is laid on it regardless (a thin blanket

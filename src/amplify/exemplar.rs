@@ -347,7 +347,7 @@ pub fn eroded_exemplar(z: &[f32], size: usize, steps: usize, uplift_floor: f32) 
         let y = i / size;
         y == 0 || y + 1 == size
     };
-    let key = crate::systems::relief::drainage::order_bits;
+    let key = crate::geometry::order_bits;
     let mut h = vec![0.0f32; n];
     let mut receiver = vec![u32::MAX; n];
     let mut order = Vec::with_capacity(n);

@@ -1038,7 +1038,7 @@ pub fn pit_depths_with_outlets(
     use std::collections::BinaryHeap;
     let n = width * height;
     assert_eq!(z.len(), n, "heightmap size");
-    let key = crate::systems::relief::drainage::order_bits;
+    let key = crate::geometry::order_bits;
     let mut level = vec![f32::NAN; n];
     let mut done = vec![false; n];
     let mut heap = BinaryHeap::new();

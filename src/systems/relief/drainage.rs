@@ -57,6 +57,7 @@ use std::collections::VecDeque;
 use rayon::prelude::*;
 
 use super::graph::ReliefGraph;
+use crate::geometry::order_bits;
 
 /// Result and scratch space of [`Drainage::compute`]; reuse one across steps to avoid
 /// allocations.
@@ -144,14 +145,7 @@ fn rain_at(precipitation: Option<&[f32]>, i: usize) -> f64 {
         .max(0.0) as f64
 }
 
-/// Key that orders f32 values totally (as `f32::total_cmp`) when compared as u32 (the priority
-/// floods' keys, here and in the sediment router, the pit measure and the exemplars' drainage).
-#[inline]
-pub(crate) fn order_bits(x: f32) -> u32 {
-    let b = x.to_bits();
-    if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
-}
-
+/// The f32 whose [`order_bits`] key is `b`.
 #[inline]
 fn level_of_bits(b: u32) -> f32 {
     f32::from_bits(if b >> 31 == 1 { b & 0x7fff_ffff } else { !b })

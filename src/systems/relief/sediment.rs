@@ -41,8 +41,9 @@ use std::collections::BinaryHeap;
 
 use rayon::prelude::*;
 
-use super::drainage::{Drainage, order_bits};
+use super::drainage::Drainage;
 use super::graph::ReliefGraph;
+use crate::geometry::order_bits;
 
 /// Parameters of the marine deposition profile. Depths are positive km below sea level.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -152,6 +152,8 @@ pub struct SedimentRouter {
     rank: Vec<u32>,
     /// The endorheic sink each land sample drains to (`u32::MAX`: the sea).
     sink_of: Vec<u32>,
+    /// The sinks one overflow passed through (see [`SedimentRouter::overflow`]).
+    chain: Vec<u32>,
     /// Passages through subducted floor (see [`SedimentRouter::passages_mut`]): per sample, the
     /// neighbour its sediment passes on to, or [`NO_PASSAGE`] where it may settle.
     through: Vec<u32>,
@@ -169,8 +171,11 @@ const MAX_PASSAGE_HOPS: usize = 256;
 #[derive(Clone, Copy)]
 struct LandPond<'a> {
     /// The endorheic sink each land sample drains to (`u32::MAX`: the sea): a lower sample
-    /// that drains to the pond's sink joins the pond.
+    /// that drains to one of the pond's sinks joins the pond.
     sink_of: &'a [u32],
+    /// The sinks whose basins the pond fills: its own, or several basins that overflow into
+    /// each other, filled as one.
+    members: &'a [u32],
     /// Whether the pond may overflow at a lower sample that drains elsewhere (else what is
     /// left is laid on the pond as a blanket).
     overflow: bool,
@@ -182,9 +187,9 @@ const MAX_POND: usize = 256;
 /// Most samples a basin with no outlet fills over from its sink before the rest is laid on it
 /// as a blanket (a large closed lake's floor; bounds the cost of one basin).
 const MAX_LAND_POND: usize = 4096;
-/// Full endorheic basins one overflow may pass through (each filled in turn) before the last
-/// keeps the rest.
-const MAX_OVERFLOWS: usize = 8;
+/// Full endorheic basins one overflow may pass through (each filled in turn, basins met again
+/// filled as one) before the last keeps the rest.
+const MAX_OVERFLOWS: usize = 16;
 /// Times one ocean sample may be processed in one call before its flux is laid on it.
 const MAX_VISITS: u8 = 8;
 /// Layers thinner than this (km) that stay within this distance of the shelf top are laid
@@ -380,6 +385,7 @@ impl SedimentRouter {
                 let sink_of = std::mem::take(&mut self.sink_of);
                 let land = LandPond {
                     sink_of: &sink_of,
+                    members: &[i as u32],
                     overflow: true,
                 };
                 let (outlet, rest) =
@@ -390,7 +396,7 @@ impl SedimentRouter {
                     && rest > 0.0
                 {
                     // The basin is full: the rest goes on from its outlet, down the network.
-                    self.overflow(g, drainage, o, k, rest, p, elevation_km, &ff, &mut b);
+                    self.overflow(g, drainage, i, o, k, rest, p, elevation_km, &ff, &mut b);
                 }
                 continue;
             }
@@ -720,16 +726,23 @@ impl SedimentRouter {
         }
     }
 
-    /// Carries `q` km³ that overflowed a full endorheic basin at land sample `o`, while the
-    /// land pass is at stack position `at`: down `o`'s receivers to the first sample the pass
-    /// has still to route (which takes it on), or to the sea. A sink already routed fills as a
-    /// pond of its own and may overflow in turn, up to [`MAX_OVERFLOWS`] basins; the last keeps
-    /// the rest as a blanket.
+    /// Carries `q` km³ that overflowed the full endorheic basin of `sink` at land sample `o`,
+    /// while the land pass is at stack position `at`: down `o`'s receivers to the first sample
+    /// the pass has still to route (which takes it on), or to the sea. A sink already routed
+    /// fills as a pond of its own and may overflow in turn, up to [`MAX_OVERFLOWS`] basins; the
+    /// last keeps the rest as a blanket.
+    ///
+    /// The network was drawn on the surface before this step's erosion, so a full basin can
+    /// overflow into one that overflows back into it (through a hollow the erosion closed
+    /// off): a sink met again makes every basin since then one pond, filled together until it
+    /// overflows elsewhere. Without it the walk went round the circle and the last basin took
+    /// all that was left as a blanket, kilometres thick.
     #[allow(clippy::too_many_arguments)]
     fn overflow(
         &mut self,
         g: &ReliefGraph,
         drainage: &Drainage,
+        sink: usize,
         o: usize,
         at: usize,
         mut q: f64,
@@ -741,6 +754,11 @@ impl SedimentRouter {
         let ocean = &drainage.ocean;
         let mut j = o;
         let mut basins = 0;
+        // The sinks passed, in order; those from `union` on fill as one pond.
+        let mut chain = std::mem::take(&mut self.chain);
+        chain.clear();
+        chain.push(sink as u32);
+        let mut union = usize::MAX;
         // Receivers come earlier in the stack, so each walk ends within the stack's length.
         let mut steps = 0;
         while steps <= drainage.stack.len() {
@@ -748,13 +766,25 @@ impl SedimentRouter {
             let r = drainage.receiver[j] as usize;
             if (self.rank[j] as usize) < at {
                 self.flux[j] += q;
-                return;
+                q = 0.0;
+                break;
             }
             if r == j {
                 basins += 1;
+                let from = match chain.iter().position(|&s| s as usize == j) {
+                    Some(m) => {
+                        union = union.min(m);
+                        union
+                    }
+                    None => {
+                        chain.push(j as u32);
+                        chain.len() - 1
+                    }
+                };
                 let sink_of = std::mem::take(&mut self.sink_of);
                 let land = LandPond {
                     sink_of: &sink_of,
+                    members: &chain[from..],
                     overflow: basins < MAX_OVERFLOWS,
                 };
                 let (outlet, rest) =
@@ -768,21 +798,28 @@ impl SedimentRouter {
                         steps = 0;
                         continue;
                     }
-                    _ => return,
+                    _ => {
+                        q = 0.0;
+                        break;
+                    }
                 }
             }
             if ocean[r] {
                 b.to_ocean_km3 += q;
                 let d0 = 0.5 * drainage.receiver_km[j];
                 self.send(r, q, d0, elevation_km);
-                return;
+                q = 0.0;
+                break;
             }
             j = r;
         }
-        // Not reached on a valid network; keep the volume where the walk stopped.
-        self.touch_deposit(j, true);
-        self.dep[j] += q;
-        b.lakes_km3 += q;
+        if q > 0.0 {
+            // Not reached on a valid network; keep the volume where the walk stopped.
+            self.touch_deposit(j, true);
+            self.dep[j] += q;
+            b.lakes_km3 += q;
+        }
+        self.chain = chain;
     }
 
     /// Adds flux `q` to ocean sample `j`, or to the end of its passage (distance from the coast
@@ -870,8 +907,9 @@ impl SedimentRouter {
             };
             let bnd = (key & 0xffff_ffff) as usize;
             let cb = cur(&self.dep, bnd);
+            let joins =
+                land.is_some_and(|l| l.sink_of.get(bnd).is_some_and(|s| l.members.contains(s)));
             if cb < level - TOL_KM {
-                let joins = land.is_some_and(|l| l.sink_of.get(bnd) == Some(&(i as u32)));
                 if !joins {
                     outlet = Some(bnd);
                     break;
@@ -908,6 +946,12 @@ impl SedimentRouter {
                 }
                 q -= need;
                 level = cb;
+            }
+            if on_land && !joins {
+                // The basin's pass (full to here; the lowest ground of another basin, or of the
+                // coast, which may only have the sea below it): the rest goes over it.
+                outlet = Some(bnd);
+                break;
             }
             self.pond.push(bnd as u32);
             self.pond_mark[bnd] = in_pond;

@@ -134,6 +134,9 @@ impl SedimentBudget {
 /// Scratch and state for sediment routing; reuse across steps.
 #[derive(Clone, Debug, Default)]
 pub struct SedimentRouter {
+    /// Full endorheic basins one overflow may pass through before the rest goes to the nearest
+    /// sea (`None`: [`MAX_OVERFLOWS`]).
+    pub max_overflows: Option<usize>,
     flux: Vec<f64>,
     dep: Vec<f64>,
     dist: Vec<f32>,
@@ -188,8 +191,9 @@ const MAX_POND: usize = 256;
 /// as a blanket (a large closed lake's floor; bounds the cost of one basin).
 const MAX_LAND_POND: usize = 4096;
 /// Full endorheic basins one overflow may pass through (each filled in turn, basins met again
-/// filled as one) before the last keeps the rest.
-const MAX_OVERFLOWS: usize = 16;
+/// filled as one) before the rest goes to the nearest sea (or, on a planet without one, the
+/// last keeps it).
+pub const MAX_OVERFLOWS: usize = 64;
 /// Times one ocean sample may be processed in one call before its flux is laid on it.
 const MAX_VISITS: u8 = 8;
 /// Layers thinner than this (km) that stay within this distance of the shelf top are laid
@@ -603,9 +607,12 @@ impl SedimentRouter {
     /// breadth first from the region's edge outward (the edge's samples with room in the order
     /// the region's search found them, from its first overfull sample; neighbours in CSR
     /// order). One search per region, not per overfull sample: a wide sea filled to the brim
-    /// was crossed again for every sample at its heart. Conserves the volume; what no ocean
-    /// sample within reach can take is laid over the region and what the spread crossed, in
-    /// proportion to area (a sea full to the brim, walled in by land).
+    /// was crossed again for every sample at its heart. The spread crosses land (and floor gone
+    /// under a margin) to the sea beyond: a speck of sea walled in by land (a trench sample
+    /// whose sea-side neighbours all went under the margin) has no room of its own, and kept
+    /// its river's whole load, 20–30 km thick. Conserves the volume; what no ocean sample
+    /// within reach can take is laid over the region and the sea the spread crossed, in
+    /// proportion to area.
     fn spread_overfull(
         &mut self,
         g: &ReliefGraph,
@@ -662,11 +669,14 @@ impl SedimentRouter {
                 head += 1;
                 for e in g.edges(u) {
                     let j = g.neighbors[e] as usize;
-                    if j == u || !ocean[j] || self.pond_mark[j] == seen {
+                    if j == u || self.pond_mark[j] == seen {
                         continue;
                     }
                     self.pond_mark[j] = seen;
-                    if room(&self.dep, j) > 0.0 {
+                    if !ocean[j] || room(&self.dep, j) > 0.0 {
+                        // Room, or land (or floor gone under a margin) the spread crosses to
+                        // the sea beyond: a speck of sea walled in by land has no room of its
+                        // own.
                         queue.push(j as u32);
                     } else {
                         region.push(j as u32);
@@ -681,7 +691,7 @@ impl SedimentRouter {
             while head < queue.len() && excess > 0.0 && head < 100_000 {
                 let u = queue[head] as usize;
                 head += 1;
-                let r = room(&self.dep, u);
+                let r = if ocean[u] { room(&self.dep, u) } else { 0.0 };
                 if r > 0.0 {
                     let v = r.min(excess);
                     self.touch(u);
@@ -693,7 +703,7 @@ impl SedimentRouter {
                 }
                 for e in g.edges(u) {
                     let j = g.neighbors[e] as usize;
-                    if j == u || !ocean[j] || self.pond_mark[j] == seen {
+                    if j == u || self.pond_mark[j] == seen {
                         continue;
                     }
                     self.pond_mark[j] = seen;
@@ -701,9 +711,9 @@ impl SedimentRouter {
                 }
             }
             if excess > 0.0 {
-                // Nowhere within reach has room: a blanket over the region and what the spread
-                // crossed, in proportion to area.
-                region.extend_from_slice(&queue);
+                // Nowhere within reach has room: a blanket over the region and the sea the
+                // spread crossed, in proportion to area.
+                region.extend(queue.iter().copied().filter(|&j| ocean[j as usize]));
                 let total: f64 = region.iter().map(|&j| g.area_km2[j as usize]).sum();
                 if total > 0.0 {
                     let mut given = 0.0;
@@ -729,8 +739,12 @@ impl SedimentRouter {
     /// Carries `q` km³ that overflowed the full endorheic basin of `sink` at land sample `o`,
     /// while the land pass is at stack position `at`: down `o`'s receivers to the first sample
     /// the pass has still to route (which takes it on), or to the sea. A sink already routed
-    /// fills as a pond of its own and may overflow in turn, up to [`MAX_OVERFLOWS`] basins; the
-    /// last keeps the rest as a blanket.
+    /// fills as a pond of its own and may overflow in turn, up to
+    /// [`SedimentRouter::max_overflows`] basins; the rest then goes to the nearest sea (on a
+    /// planet without one, the last basin keeps it as a blanket). That limit bounds the cost of
+    /// a plain pocked with pits; when the last basin kept the rest, one sample of such a plain
+    /// took up to 570 km of sediment in a step (the default planet, before this limit's
+    /// fallback), and stood at the height cap for a hundred million years.
     ///
     /// The network was drawn on the surface before this step's erosion, so a full basin can
     /// overflow into one that overflows back into it (through a hollow the erosion closed
@@ -759,6 +773,7 @@ impl SedimentRouter {
         chain.clear();
         chain.push(sink as u32);
         let mut union = usize::MAX;
+        let limit = self.max_overflows.unwrap_or(MAX_OVERFLOWS);
         // Receivers come earlier in the stack, so each walk ends within the stack's length.
         let mut steps = 0;
         while steps <= drainage.stack.len() {
@@ -771,6 +786,16 @@ impl SedimentRouter {
             }
             if r == j {
                 basins += 1;
+                if basins > limit
+                    && let Some((sea, d)) = self.nearest_sea(g, ocean, j)
+                {
+                    // A long chain of small full basins (a plain pocked with pits): what is
+                    // left goes to the nearest sea, not on the last basin as a blanket.
+                    b.to_ocean_km3 += q;
+                    self.send(sea, q, d, elevation_km);
+                    q = 0.0;
+                    break;
+                }
                 let from = match chain.iter().position(|&s| s as usize == j) {
                     Some(m) => {
                         union = union.min(m);
@@ -785,7 +810,7 @@ impl SedimentRouter {
                 let land = LandPond {
                     sink_of: &sink_of,
                     members: &chain[from..],
-                    overflow: basins < MAX_OVERFLOWS,
+                    overflow: basins <= limit,
                 };
                 let (outlet, rest) =
                     self.pond_fill(g, ocean, j, q, p, elevation_km, ff, Some(land));
@@ -820,6 +845,31 @@ impl SedimentRouter {
             b.lakes_km3 += q;
         }
         self.chain = chain;
+    }
+
+    /// The ocean sample nearest to land sample `j` (breadth first over the graph, neighbours in
+    /// CSR order) and its distance (km, one mean spacing a hop); `None` without an ocean.
+    fn nearest_sea(&mut self, g: &ReliefGraph, ocean: &[bool], j: usize) -> Option<(usize, f32)> {
+        let seen = self.fresh_epoch();
+        let mut queue: Vec<(u32, u32)> = vec![(j as u32, 0)];
+        self.pond_mark[j] = seen;
+        let mut head = 0;
+        while head < queue.len() {
+            let (u, hops) = queue[head];
+            head += 1;
+            for e in g.edges(u as usize) {
+                let k = g.neighbors[e] as usize;
+                if k == u as usize || self.pond_mark[k] == seen {
+                    continue;
+                }
+                if ocean[k] {
+                    return Some((k, ((hops + 1) as f64 * g.mean_spacing_km) as f32));
+                }
+                self.pond_mark[k] = seen;
+                queue.push((k as u32, hops + 1));
+            }
+        }
+        None
     }
 
     /// Adds flux `q` to ocean sample `j`, or to the end of its passage (distance from the coast

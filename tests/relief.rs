@@ -2143,7 +2143,7 @@ fn pits_that_overflow_into_each_other_fill_together() {
     // pits hold.
     let plain = |p: DVec3| {
         let dx = dist_from_x(p);
-        (dx <= 2000.0).then(|| 0.05 + 0.00001 * (2000.0 - dx))
+        (dx <= 2000.0).then_some(0.05 + 0.00001 * (2000.0 - dx))
     };
     let b = route_over_pitted_plain(plain, 77, 0.1, None);
     assert!(
@@ -2219,7 +2219,7 @@ fn a_long_chain_of_full_basins_ends_in_the_sea() {
     // The sea within 1,500 km of −x; the plain rises 0.01 m/km away from it; 10 m eroded.
     let plain = |p: DVec3| {
         let d = angle_between(p, -DVec3::X) * RADIUS_KM;
-        (d >= 1500.0).then(|| 0.05 + 0.00001 * d)
+        (d >= 1500.0).then_some(0.05 + 0.00001 * d)
     };
     let b = route_over_pitted_plain(plain, 78, 0.01, Some(16));
     assert!(b.to_ocean_km3 > 0.0, "nothing reached the sea");

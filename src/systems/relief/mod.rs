@@ -224,12 +224,16 @@ pub struct ReliefState {
 
 impl ReliefState {
     /// Frees the relief passes' work areas (rebuilt at their next use): see
-    /// [`crate::simulation::Simulation::release_scratch`]. Keeps the graph, the caches and what
-    /// the summary reads (the trench depths, the sea level, the deflection).
+    /// [`crate::simulation::Simulation::release_scratch`]. Keeps the graph, the caches, the
+    /// router's limit on overflows and what the summary reads (the trench depths, the sea level,
+    /// the deflection).
     pub fn release_scratch(&mut self) {
         self.spl = StreamPowerScratch::default();
         self.diffusion = DiffusionScratch::default();
+        // The router's setting stays; only its buffers go.
+        let max_overflows = self.router.max_overflows;
         self.router = SedimentRouter::default();
+        self.router.max_overflows = max_overflows;
         self.sea = SeaMaskScratch::default();
         self.fill = Vec::new();
     }

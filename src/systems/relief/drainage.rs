@@ -342,9 +342,15 @@ impl Drainage {
                             let (nb, inv) = (&g.neighbors[a..b], &g.inv_edge_km[a..b]);
                             // inv = 0 for degenerate edges: slope 0, never chosen.
                             let slope = |k: usize| (hi - h[nb[k] as usize]) * inv[k];
+                            // The slopes are kept for a plain's draw (up to 16 neighbours; a
+                            // sample with more computes them again).
+                            let mut kept = [0.0f32; 16];
                             let (mut best, mut best_k) = (0.0f32, 0);
                             for k in 0..nb.len() {
                                 let s = slope(k);
+                                if let Some(slot) = kept.get_mut(k) {
+                                    *slot = s;
+                                }
                                 // The strict `>` keeps the first of equal slopes.
                                 if s > best {
                                     best = s;
@@ -353,8 +359,14 @@ impl Drainage {
                             }
                             if best > 0.0 {
                                 if best < PLAIN_SLOPE {
-                                    let slopes = || (0..nb.len()).map(slope);
-                                    best_k = plain_draw(i, (best, best_k), slopes);
+                                    best_k = match kept.get(..nb.len()) {
+                                        Some(kept) => {
+                                            plain_draw(i, (best, best_k), || kept.iter().copied())
+                                        }
+                                        None => {
+                                            plain_draw(i, (best, best_k), || (0..nb.len()).map(slope))
+                                        }
+                                    };
                                 }
                                 r = nb[best_k];
                                 d = g.edge_km[a + best_k];

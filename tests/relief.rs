@@ -885,6 +885,92 @@ fn closed_basin_fills_and_overflows_as_a_lake() {
     }
 }
 
+/// Sediment that a river brings into a lake settles on the lake's floor, lowest first, as one
+/// level pond: nothing rises above the water, the crater's deepest sample takes its share, and
+/// the filled floor is flat. Seen to fail when each lake sample on the river's way to the outlet
+/// was filled to the water level in turn: straight causeways across the lake (the straight
+/// ridges on the default planet's plains, once their lakes were gone), the floor untouched.
+#[test]
+fn sediment_brought_into_a_lake_fills_its_floor_from_the_lowest() {
+    let (mesh, g) = mesh_graph(50_000);
+    let (h, ocean) = crater_surface(mesh, g);
+    let mut d = Drainage::new();
+    d.compute(g, &h, &ocean, None);
+    let lake: Vec<usize> = (0..g.len()).filter(|&i| d.is_lake(i)).collect();
+    let capacity: f64 = lake
+        .iter()
+        .map(|&i| d.lake_depth_km(i) as f64 * g.area_km2[i])
+        .sum();
+    // Rock worn from one quarter of the lake's shallows and of the slopes above them: it enters
+    // the lake on one shore.
+    let max_depth = lake
+        .iter()
+        .map(|&i| d.lake_depth_km(i))
+        .fold(0.0f32, f32::max);
+    let quarter: Vec<usize> = (0..g.len())
+        .filter(|&i| {
+            let p = mesh.positions[i];
+            if ocean[i] || d.lake_depth_km(i) > 0.5 * max_depth || p.y <= 0.0 || p.z <= 0.0 {
+                return false;
+            }
+            let mut j = i;
+            while !ocean[j] {
+                if d.is_lake(j) {
+                    return true;
+                }
+                j = d.receiver[j] as usize;
+            }
+            false
+        })
+        .collect();
+    assert!(quarter.len() > 5, "catchment samples {}", quarter.len());
+    let (input, dep, b) = route_evenly(g, &d, &h, &quarter, 0.3 * capacity);
+    assert!(
+        b.relative_error() < 1e-6,
+        "router error {}",
+        b.relative_error()
+    );
+    let in_lake: f64 = lake.iter().map(|&i| dep[i] as f64 * g.area_km2[i]).sum();
+    assert!(
+        (in_lake - input).abs() / input < 1e-3,
+        "the lake kept {in_lake:.0} of {input:.0} km³"
+    );
+    let filled: Vec<usize> = lake.iter().copied().filter(|&i| dep[i] > 0.0).collect();
+    let surface = |i: usize| h[i] + dep[i];
+    let (lo, hi) = filled.iter().fold((f32::MAX, f32::MIN), |(a, b), &i| {
+        (a.min(surface(i)), b.max(surface(i)))
+    });
+    let centre = nearest(mesh, DVec3::X);
+    println!(
+        "{} of {} lake samples filled, to {lo:.4}..{hi:.4} km; water level {:.4} km; centre +{:.3} km",
+        filled.len(),
+        lake.len(),
+        d.water_level_km[centre],
+        dep[centre]
+    );
+    for &i in &lake {
+        assert!(
+            surface(i) <= d.water_level_km[i] + 1e-4,
+            "lake sample {i} filled to {} km, over its water level {} km",
+            surface(i),
+            d.water_level_km[i]
+        );
+    }
+    assert!(
+        dep[centre] > 0.0,
+        "the crater's deepest sample took nothing"
+    );
+    assert!(
+        hi - lo < 1e-3,
+        "the filled floor is not level: {lo}..{hi} km"
+    );
+    assert!(
+        hi < d.water_level_km[centre] - 0.05,
+        "a third of the lake's room filled it to {hi} km (water level {} km)",
+        d.water_level_km[centre]
+    );
+}
+
 /// A lake its catchment cannot keep full (water balance `lake_area_ratio`) shrinks to that
 /// share of its catchment, has no outlet, and keeps all the sediment of its basin; with a
 /// generous balance the same crater overflows as before. Seen to fail with the balance step

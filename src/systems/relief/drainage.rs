@@ -363,9 +363,9 @@ impl Drainage {
                                         Some(kept) => {
                                             plain_draw(i, (best, best_k), || kept.iter().copied())
                                         }
-                                        None => {
-                                            plain_draw(i, (best, best_k), || (0..nb.len()).map(slope))
-                                        }
+                                        None => plain_draw(i, (best, best_k), || {
+                                            (0..nb.len()).map(slope)
+                                        }),
                                     };
                                 }
                                 r = nb[best_k];

@@ -201,6 +201,30 @@ const MAX_VISITS: u8 = 8;
 const FAST_PATH_KM: f64 = 0.01;
 /// Level differences below this (km) count as flat.
 const TOL_KM: f64 = 1e-6;
+/// Lake samples whose water levels differ by at most this (km) are one lake (the flood that
+/// makes lakes raises each sample's level a rounding step over the one that flooded it).
+const LAKE_LEVEL_TOL_KM: f64 = 1e-3;
+
+/// Where what lake sample `i` passes on leaves its lake: down the receivers from `i`, the last
+/// sample of the lake (`.0`) and the first beyond it (`.1`: a land sample outside the lake, a
+/// sample of the sea, or `.0` itself when the lake drains to no sea and `.0` is its sink).
+fn lake_exit(drainage: &Drainage, i: usize) -> (usize, usize) {
+    let wl = drainage.water_level_km[i] as f64;
+    let mut j = i;
+    for _ in 0..drainage.receiver.len() {
+        let r = drainage.receiver[j] as usize;
+        if r == j {
+            return (j, j);
+        }
+        let same = drainage.is_lake(r)
+            && (drainage.water_level_km[r] as f64 - wl).abs() <= LAKE_LEVEL_TOL_KM;
+        if !same {
+            return (j, r);
+        }
+        j = r;
+    }
+    (j, j)
+}
 
 impl SedimentRouter {
     /// New router; buffers grow on first use.
@@ -405,15 +429,34 @@ impl SedimentRouter {
                 continue;
             }
             if depth > 0.0 {
-                let d = q.min(depth * g.area_km2[i] / ff(i));
-                if d > 0.0 {
-                    if self.dep[i] == 0.0 {
-                        self.touched.push(i as u32);
-                    }
-                    self.dep[i] += d;
+                // A lake: the load settles on the lake's floor, lowest first (not on the
+                // samples along the flood's straight paths to the outlet, which it would raise
+                // to the water surface one after the other: causeways across the lake that
+                // stand as straight ridges once it is gone). What the lake cannot hold goes on
+                // from its outlet.
+                let rest = self.lake_fill(g, drainage, i, q, elevation_km, &ff);
+                b.lakes_km3 += q - rest;
+                q = rest;
+                if q <= 0.0 {
+                    continue;
                 }
-                b.lakes_km3 += d;
-                q -= d;
+                let (j, end) = lake_exit(drainage, i);
+                if end != j && !ocean[end] {
+                    // Past the lake: on down the network from the first sample beyond it (or
+                    // into the endorheic sink the lake drains to).
+                    self.flux[end] += q;
+                    continue;
+                }
+                if end == j && j != i {
+                    self.flux[j] += q;
+                    continue;
+                }
+                if ocean[end] {
+                    b.to_ocean_km3 += q;
+                    let d0 = 0.5 * drainage.receiver_km[j];
+                    self.send(end, q, d0, elevation_km);
+                    continue;
+                }
             }
             if q <= 0.0 {
                 continue;
@@ -888,6 +931,149 @@ impl SedimentRouter {
             self.heap
                 .push(((order_bits(z) as u64) << 32) | (!(j as u32)) as u64);
         }
+    }
+
+    /// Lays up to `q` km³ that reached lake sample `i` on the lake's floor: down the floor
+    /// (the lake's samples, those whose water level is the same as `i`'s within
+    /// [`LAKE_LEVEL_TOL_KM`]) from `i` to a low point, then filling from there, lowest ground
+    /// first, up to the water surface (at most [`MAX_LAND_POND`] samples). Returns what the lake
+    /// could not hold there.
+    fn lake_fill(
+        &mut self,
+        g: &ReliefGraph,
+        drainage: &Drainage,
+        i: usize,
+        mut q: f64,
+        elevation_km: &[f32],
+        ff: &dyn Fn(usize) -> f64,
+    ) -> f64 {
+        let wl = drainage.water_level_km[i] as f64;
+        let same_lake = |k: usize| {
+            drainage.is_lake(k)
+                && (drainage.water_level_km[k] as f64 - wl).abs() <= LAKE_LEVEL_TOL_KM
+        };
+        let cur = |dep: &[f64], j: usize| -> f64 {
+            let z = elevation_km[j];
+            let z = if z.is_finite() { z as f64 } else { 0.0 };
+            z + ff(j) * dep[j] / g.area_km2[j].max(1e-12)
+        };
+        // Down the floor to a low point (each move strictly lower, so it ends).
+        let mut m = i;
+        for _ in 0..MAX_LAND_POND {
+            let mut best = (cur(&self.dep, m), m);
+            for &k in g.neighbors_of(m) {
+                let k = k as usize;
+                if same_lake(k) {
+                    let c = cur(&self.dep, k);
+                    if c < best.0 - TOL_KM {
+                        best = (c, k);
+                    }
+                }
+            }
+            if best.1 == m {
+                break;
+            }
+            m = best.1;
+        }
+        let in_pond = self.fresh_epoch();
+        let in_heap = in_pond + 1;
+        self.pond.clear();
+        self.pond_heap.clear();
+        self.pond.push(m as u32);
+        self.pond_mark[m] = in_pond;
+        let mut level = cur(&self.dep, m);
+        let mut inv = g.area_km2[m] / ff(m);
+        let q0 = q;
+        loop {
+            if level >= wl {
+                break;
+            }
+            let need = (wl - level) * inv;
+            if self.pond.len() >= MAX_LAND_POND {
+                // The size limit: the pond rises as one towards the surface.
+                let used = q.min(need);
+                level += used / inv;
+                q -= used;
+                break;
+            }
+            let newest = *self.pond.last().unwrap_or(&(m as u32)) as usize;
+            for e in g.edges(newest) {
+                let k = g.neighbors[e] as usize;
+                if k == newest
+                    || self.pond_mark[k] == in_pond
+                    || self.pond_mark[k] == in_heap
+                    || !same_lake(k)
+                {
+                    continue;
+                }
+                self.pond_mark[k] = in_heap;
+                let c = cur(&self.dep, k) as f32;
+                self.pond_heap
+                    .push(std::cmp::Reverse(((order_bits(c) as u64) << 32) | k as u64));
+            }
+            let Some(std::cmp::Reverse(key)) = self.pond_heap.pop() else {
+                // The whole lake floor is in the pond: it rises to the surface at most.
+                let used = q.min(need);
+                level += used / inv;
+                q -= used;
+                break;
+            };
+            let bnd = (key & 0xffff_ffff) as usize;
+            let cb = cur(&self.dep, bnd).min(wl);
+            if cb > level {
+                let step = (cb - level) * inv;
+                if q <= step {
+                    level += q / inv;
+                    q = 0.0;
+                    break;
+                }
+                q -= step;
+                level = cb;
+            } else {
+                // Lower ground of the floor (the pond rose past it): it fills to the level.
+                q -= (level - cb) * g.area_km2[bnd] / ff(bnd);
+            }
+            self.pond.push(bnd as u32);
+            self.pond_mark[bnd] = in_pond;
+            inv += g.area_km2[bnd] / ff(bnd);
+            if q <= 0.0 {
+                // Filling the lower ground took more than was left: the level settles lower.
+                level += q / inv;
+                q = 0.0;
+                break;
+            }
+        }
+        // Lay the used volume on the pond, in proportion to each sample's room under the level.
+        let used = q0 - q;
+        let mut shares = std::mem::take(&mut self.shares);
+        shares.clear();
+        shares.extend(self.pond.iter().map(|&j| {
+            let j = j as usize;
+            (
+                j,
+                (level - cur(&self.dep, j)).max(0.0) * g.area_km2[j] / ff(j),
+            )
+        }));
+        let wsum: f64 = shares.iter().map(|s| s.1).sum();
+        if wsum > 0.0 && used > 0.0 {
+            let mut given = 0.0;
+            let last = shares.len() - 1;
+            for (k, &(j, w)) in shares.iter().enumerate() {
+                let v = if k == last {
+                    used - given
+                } else {
+                    used * w / wsum
+                };
+                given += v;
+                self.touch_deposit(j, true);
+                self.dep[j] += v;
+            }
+        } else if used > 0.0 {
+            self.touch_deposit(m, true);
+            self.dep[m] += used;
+        }
+        self.shares = shares;
+        q
     }
 
     /// Grows a pond from local minimum `i` with `q` km³: returns the outlet (a sample lower than

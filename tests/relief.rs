@@ -768,6 +768,19 @@ fn chain_end(d: &Drainage, i: usize) -> usize {
     panic!("cycle through sample {i}");
 }
 
+/// Whether the receiver chain from land sample `i` meets a lake before the sea (`i` itself
+/// counts).
+fn drains_into_a_lake(d: &Drainage, ocean: &[bool], i: usize) -> bool {
+    let mut j = i;
+    while !ocean[j] {
+        if d.is_lake(j) {
+            return true;
+        }
+        j = d.receiver[j] as usize;
+    }
+    false
+}
+
 /// Erodes `volume` km³ evenly over `samples` and routes it with the default sediment
 /// parameters: the volume that entered, the deposits (km) and the router's budget.
 fn route_evenly(
@@ -840,16 +853,7 @@ fn closed_basin_fills_and_overflows_as_a_lake() {
         .map(|&i| d.lake_depth_km(i) as f64 * g.area_km2[i])
         .sum();
     let upstream: Vec<usize> = (0..g.len())
-        .filter(|&i| {
-            let mut j = i;
-            while !ocean[j] {
-                if d.is_lake(j) {
-                    return true;
-                }
-                j = d.receiver[j] as usize;
-            }
-            false
-        })
+        .filter(|&i| drains_into_a_lake(&d, &ocean, i))
         .collect();
     assert!(
         upstream.len() > lake.len(),
@@ -910,17 +914,8 @@ fn sediment_brought_into_a_lake_fills_its_floor_from_the_lowest() {
     let quarter: Vec<usize> = (0..g.len())
         .filter(|&i| {
             let p = mesh.positions[i];
-            if ocean[i] || d.lake_depth_km(i) > 0.5 * max_depth || p.y <= 0.0 || p.z <= 0.0 {
-                return false;
-            }
-            let mut j = i;
-            while !ocean[j] {
-                if d.is_lake(j) {
-                    return true;
-                }
-                j = d.receiver[j] as usize;
-            }
-            false
+            !(ocean[i] || d.lake_depth_km(i) > 0.5 * max_depth || p.y <= 0.0 || p.z <= 0.0)
+                && drains_into_a_lake(&d, &ocean, i)
         })
         .collect();
     assert!(quarter.len() > 5, "catchment samples {}", quarter.len());

@@ -1043,36 +1043,7 @@ impl SedimentRouter {
                 break;
             }
         }
-        // Lay the used volume on the pond, in proportion to each sample's room under the level.
-        let used = q0 - q;
-        let mut shares = std::mem::take(&mut self.shares);
-        shares.clear();
-        shares.extend(self.pond.iter().map(|&j| {
-            let j = j as usize;
-            (
-                j,
-                (level - cur(&self.dep, j)).max(0.0) * g.area_km2[j] / ff(j),
-            )
-        }));
-        let wsum: f64 = shares.iter().map(|s| s.1).sum();
-        if wsum > 0.0 && used > 0.0 {
-            let mut given = 0.0;
-            let last = shares.len() - 1;
-            for (k, &(j, w)) in shares.iter().enumerate() {
-                let v = if k == last {
-                    used - given
-                } else {
-                    used * w / wsum
-                };
-                given += v;
-                self.touch_deposit(j, true);
-                self.dep[j] += v;
-            }
-        } else if used > 0.0 {
-            self.touch_deposit(m, true);
-            self.dep[m] += used;
-        }
-        self.shares = shares;
+        self.lay_on_pond(g, q0 - q, level, m, true, &cur, ff);
         q
     }
 
@@ -1218,15 +1189,31 @@ impl SedimentRouter {
                 }
             }
         }
-        // Lay the used volume on the pond, proportionally to each sample's share.
-        let used = q0 - q;
+        self.lay_on_pond(g, q0 - q, level, i, on_land, &cur, ff);
+        (outlet, q)
+    }
+
+    /// Lays `used` km³ on the pond (`self.pond`) that rose to `level`, each sample's share in
+    /// proportion to its room under the level (`surface`: a sample's current surface, km); on
+    /// `start` when no sample has room.
+    #[allow(clippy::too_many_arguments)]
+    fn lay_on_pond(
+        &mut self,
+        g: &ReliefGraph,
+        used: f64,
+        level: f64,
+        start: usize,
+        on_land: bool,
+        surface: &dyn Fn(&[f64], usize) -> f64,
+        ff: &dyn Fn(usize) -> f64,
+    ) {
         let mut shares = std::mem::take(&mut self.shares);
         shares.clear();
         shares.extend(self.pond.iter().map(|&j| {
             let j = j as usize;
             (
                 j,
-                (level - cur(&self.dep, j)).max(0.0) * g.area_km2[j] / ff(j),
+                (level - surface(&self.dep, j)).max(0.0) * g.area_km2[j] / ff(j),
             )
         }));
         let wsum: f64 = shares.iter().map(|s| s.1).sum();
@@ -1244,10 +1231,9 @@ impl SedimentRouter {
                 self.dep[j] += v;
             }
         } else if used > 0.0 {
-            self.touch_deposit(i, on_land);
-            self.dep[i] += used;
+            self.touch_deposit(start, on_land);
+            self.dep[start] += used;
         }
         self.shares = shares;
-        (outlet, q)
     }
 }

@@ -441,20 +441,16 @@ impl SedimentRouter {
                     continue;
                 }
                 let (j, end) = lake_exit(drainage, i);
-                if end != j && !ocean[end] {
-                    // Past the lake: on down the network from the first sample beyond it (or
-                    // into the endorheic sink the lake drains to).
-                    self.flux[end] += q;
-                    continue;
-                }
-                if end == j && j != i {
-                    self.flux[j] += q;
-                    continue;
-                }
                 if ocean[end] {
                     b.to_ocean_km3 += q;
                     let d0 = 0.5 * drainage.receiver_km[j];
                     self.send(end, q, d0, elevation_km);
+                    continue;
+                }
+                if end != i {
+                    // Past the lake: on down the network from the first sample beyond it, or
+                    // into the endorheic sink the lake drains to.
+                    self.flux[end] += q;
                     continue;
                 }
             }

@@ -216,14 +216,34 @@ fn lake_exit(drainage: &Drainage, i: usize) -> (usize, usize) {
         if r == j {
             return (j, j);
         }
-        let same = drainage.is_lake(r)
-            && (drainage.water_level_km[r] as f64 - wl).abs() <= LAKE_LEVEL_TOL_KM;
-        if !same {
+        if !in_lake(drainage, r, wl) {
             return (j, r);
         }
         j = r;
     }
     (j, j)
+}
+
+/// Whether sample `k` lies in the lake whose water level is `wl_km` (within
+/// [`LAKE_LEVEL_TOL_KM`]).
+#[inline]
+fn in_lake(drainage: &Drainage, k: usize, wl_km: f64) -> bool {
+    drainage.is_lake(k) && (drainage.water_level_km[k] as f64 - wl_km).abs() <= LAKE_LEVEL_TOL_KM
+}
+
+/// Current surface of sample `j` with the deposit `dep` (km³ per sample) laid on it, km: its
+/// elevation (sea level where not finite) raised by `ff(j)` of the deposit's thickness.
+#[inline]
+fn surface_km(
+    g: &ReliefGraph,
+    elevation_km: &[f32],
+    ff: &dyn Fn(usize) -> f64,
+    dep: &[f64],
+    j: usize,
+) -> f64 {
+    let z = elevation_km[j];
+    let z = if z.is_finite() { z as f64 } else { 0.0 };
+    z + ff(j) * dep[j] / g.area_km2[j].max(1e-12)
 }
 
 impl SedimentRouter {
@@ -399,7 +419,9 @@ impl SedimentRouter {
                 continue;
             }
             self.flux[i] = 0.0;
-            let r = drainage.receiver[i] as usize;
+            let mut r = drainage.receiver[i] as usize;
+            // Where what is left goes on from (its distance to the sea counts from there).
+            let mut from = i;
             // Lake: fill up to the water level. Endorheic sink: keep everything.
             let depth = if drainage.is_lake(i) {
                 drainage.water_level_km[i] as f64 - z_of(i)
@@ -440,18 +462,11 @@ impl SedimentRouter {
                 if q <= 0.0 {
                     continue;
                 }
+                // Past the lake: on from the first sample beyond it (land or sea), or into the
+                // endorheic sink the lake drains to.
                 let (j, end) = lake_exit(drainage, i);
-                if ocean[end] {
-                    b.to_ocean_km3 += q;
-                    let d0 = 0.5 * drainage.receiver_km[j];
-                    self.send(end, q, d0, elevation_km);
-                    continue;
-                }
                 if end != i {
-                    // Past the lake: on down the network from the first sample beyond it, or
-                    // into the endorheic sink the lake drains to.
-                    self.flux[end] += q;
-                    continue;
+                    (from, r) = (j, end);
                 }
             }
             if q <= 0.0 {
@@ -459,7 +474,7 @@ impl SedimentRouter {
             }
             if ocean[r] {
                 b.to_ocean_km3 += q;
-                let d0 = 0.5 * drainage.receiver_km[i];
+                let d0 = 0.5 * drainage.receiver_km[from];
                 self.send(r, q, d0, elevation_km);
             } else {
                 self.flux[r] += q;
@@ -944,15 +959,8 @@ impl SedimentRouter {
         ff: &dyn Fn(usize) -> f64,
     ) -> f64 {
         let wl = drainage.water_level_km[i] as f64;
-        let same_lake = |k: usize| {
-            drainage.is_lake(k)
-                && (drainage.water_level_km[k] as f64 - wl).abs() <= LAKE_LEVEL_TOL_KM
-        };
-        let cur = |dep: &[f64], j: usize| -> f64 {
-            let z = elevation_km[j];
-            let z = if z.is_finite() { z as f64 } else { 0.0 };
-            z + ff(j) * dep[j] / g.area_km2[j].max(1e-12)
-        };
+        let same_lake = |k: usize| in_lake(drainage, k, wl);
+        let cur = |dep: &[f64], j: usize| surface_km(g, elevation_km, ff, dep, j);
         // Down the floor to a low point (each move strictly lower, so it ends).
         let mut m = i;
         for _ in 0..MAX_LAND_POND {
@@ -972,7 +980,6 @@ impl SedimentRouter {
             m = best.1;
         }
         let in_pond = self.fresh_epoch();
-        let in_heap = in_pond + 1;
         self.pond.clear();
         self.pond_heap.clear();
         self.pond.push(m as u32);
@@ -984,32 +991,16 @@ impl SedimentRouter {
             if level >= wl {
                 break;
             }
-            let need = (wl - level) * inv;
-            if self.pond.len() >= MAX_LAND_POND {
-                // The size limit: the pond rises as one towards the surface.
-                let used = q.min(need);
-                level += used / inv;
-                q -= used;
-                break;
-            }
-            let newest = *self.pond.last().unwrap_or(&(m as u32)) as usize;
-            for e in g.edges(newest) {
-                let k = g.neighbors[e] as usize;
-                if k == newest
-                    || self.pond_mark[k] == in_pond
-                    || self.pond_mark[k] == in_heap
-                    || !same_lake(k)
-                {
-                    continue;
-                }
-                self.pond_mark[k] = in_heap;
-                let c = cur(&self.dep, k) as f32;
-                self.pond_heap
-                    .push(std::cmp::Reverse(((order_bits(c) as u64) << 32) | k as u64));
-            }
-            let Some(std::cmp::Reverse(key)) = self.pond_heap.pop() else {
-                // The whole lake floor is in the pond: it rises to the surface at most.
-                let used = q.min(need);
+            let next = if self.pond.len() < MAX_LAND_POND {
+                self.push_boundary(g, in_pond, &same_lake, elevation_km, ff);
+                self.pond_heap.pop()
+            } else {
+                None
+            };
+            let Some(std::cmp::Reverse(key)) = next else {
+                // The whole lake floor is in the pond, or the pond is at its size limit: it
+                // rises as one towards the surface.
+                let used = q.min((wl - level) * inv);
                 level += used / inv;
                 q -= used;
                 break;
@@ -1039,8 +1030,40 @@ impl SedimentRouter {
                 break;
             }
         }
-        self.lay_on_pond(g, q0 - q, level, m, true, &cur, ff);
+        self.lay_on_pond(g, q0 - q, level, m, true, elevation_km, ff);
         q
+    }
+
+    /// Puts the neighbours of the pond's newest sample that `admit` lets in, and that are not in
+    /// the pond (`pond_mark` = `in_pond`) or its boundary (`in_pond + 1`) yet, on the boundary
+    /// heap, keyed by their current surface.
+    fn push_boundary(
+        &mut self,
+        g: &ReliefGraph,
+        in_pond: u32,
+        admit: &dyn Fn(usize) -> bool,
+        elevation_km: &[f32],
+        ff: &dyn Fn(usize) -> f64,
+    ) {
+        let in_heap = in_pond + 1;
+        let Some(&newest) = self.pond.last() else {
+            return;
+        };
+        let newest = newest as usize;
+        for e in g.edges(newest) {
+            let k = g.neighbors[e] as usize;
+            if k == newest
+                || self.pond_mark[k] == in_pond
+                || self.pond_mark[k] == in_heap
+                || !admit(k)
+            {
+                continue;
+            }
+            self.pond_mark[k] = in_heap;
+            let c = surface_km(g, elevation_km, ff, &self.dep, k) as f32;
+            self.pond_heap
+                .push(std::cmp::Reverse(((order_bits(c) as u64) << 32) | k as u64));
+        }
     }
 
     /// Grows a pond from local minimum `i` with `q` km³: returns the outlet (a sample lower than
@@ -1070,12 +1093,7 @@ impl SedimentRouter {
             (-p.coast_depth_km, MAX_POND)
         };
         let in_pond = self.fresh_epoch();
-        let in_heap = in_pond + 1;
-        let cur = |dep: &[f64], j: usize| -> f64 {
-            let z = elevation_km[j];
-            let z = if z.is_finite() { z as f64 } else { 0.0 };
-            z + ff(j) * dep[j] / g.area_km2[j].max(1e-12)
-        };
+        let cur = |dep: &[f64], j: usize| surface_km(g, elevation_km, ff, dep, j);
         self.pond.clear();
         self.pond_heap.clear();
         self.pond.push(i as u32);
@@ -1090,21 +1108,7 @@ impl SedimentRouter {
                 break;
             }
             // Neighbours of the newest pond sample enter the boundary.
-            let newest = *self.pond.last().unwrap_or(&(i as u32)) as usize;
-            for e in g.edges(newest) {
-                let k = g.neighbors[e] as usize;
-                if k == newest
-                    || ocean[k] == on_land
-                    || self.pond_mark[k] == in_pond
-                    || self.pond_mark[k] == in_heap
-                {
-                    continue;
-                }
-                self.pond_mark[k] = in_heap;
-                let c = cur(&self.dep, k) as f32;
-                self.pond_heap
-                    .push(std::cmp::Reverse(((order_bits(c) as u64) << 32) | k as u64));
-            }
+            self.push_boundary(g, in_pond, &|k| ocean[k] != on_land, elevation_km, ff);
             let Some(std::cmp::Reverse(key)) = self.pond_heap.pop() else {
                 break;
             };
@@ -1185,13 +1189,13 @@ impl SedimentRouter {
                 }
             }
         }
-        self.lay_on_pond(g, q0 - q, level, i, on_land, &cur, ff);
+        self.lay_on_pond(g, q0 - q, level, i, on_land, elevation_km, ff);
         (outlet, q)
     }
 
     /// Lays `used` km³ on the pond (`self.pond`) that rose to `level`, each sample's share in
-    /// proportion to its room under the level (`surface`: a sample's current surface, km); on
-    /// `start` when no sample has room.
+    /// proportion to its room under the level (see [`surface_km`]); on `start` when no sample
+    /// has room.
     #[allow(clippy::too_many_arguments)]
     fn lay_on_pond(
         &mut self,
@@ -1200,7 +1204,7 @@ impl SedimentRouter {
         level: f64,
         start: usize,
         on_land: bool,
-        surface: &dyn Fn(&[f64], usize) -> f64,
+        elevation_km: &[f32],
         ff: &dyn Fn(usize) -> f64,
     ) {
         let mut shares = std::mem::take(&mut self.shares);
@@ -1209,7 +1213,8 @@ impl SedimentRouter {
             let j = j as usize;
             (
                 j,
-                (level - surface(&self.dep, j)).max(0.0) * g.area_km2[j] / ff(j),
+                (level - surface_km(g, elevation_km, ff, &self.dep, j)).max(0.0) * g.area_km2[j]
+                    / ff(j),
             )
         }));
         let wsum: f64 = shares.iter().map(|s| s.1).sum();

@@ -2,19 +2,23 @@
 //! (issue 19's measure), counted over all the land and over the land that drains to the sea in
 //! the coarse network (outside its closed basins, whose depressions the valleys keep).
 //!
-//! `cargo run --release --example valley_pits -- SAVE LAT0,LON0,LAT1,LON1 [DEPTH_M [PITS_PNG]]`
-//! (the PNG: the carved tile shaded, its pits red).
+//! `cargo run --release --example valley_pits -- SAVE LAT0,LON0,LAT1,LON1 [DEPTH_M [PITS_PNG
+//! [EXEMPLARS_DIR]]]` (the PNG: the carved tile shaded, its pits red; the folder: exemplars for
+//! the continental relief, as `planet export --exemplars`).
 
 use glam::DVec3;
 use tectonic_planets::amplify::valleys::drains_to_sea;
 use tectonic_planets::amplify::{Amplifier, AmplifyOptions, pit_depths, pit_depths_with_outlets};
+use tectonic_planets::io::exemplars::load_exemplar_dir;
 use tectonic_planets::io::export::{GeoGrid, parse_resolution};
 use tectonic_planets::io::rivers::{NetworkOptions, RiverNetwork};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 3 {
-        eprintln!("usage: valley_pits SAVE LAT0,LON0,LAT1,LON1 [DEPTH_M [PITS_PNG]]");
+        eprintln!(
+            "usage: valley_pits SAVE LAT0,LON0,LAT1,LON1 [DEPTH_M [PITS_PNG [EXEMPLARS_DIR]]]"
+        );
         std::process::exit(2);
     }
     let depth: f32 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(10.0);
@@ -40,9 +44,19 @@ fn main() {
         "the planet: {:.1}% of the land samples drain to no sea",
         100.0 * (1.0 - open_land as f64 / land.max(1) as f64)
     );
-    let plain = Amplifier::new(mesh, &view, seed, AmplifyOptions::default());
-    let carved = Amplifier::new(mesh, &view, seed, AmplifyOptions::default())
-        .with_valleys(net.valley_network());
+    let amplifier = || {
+        let amp = Amplifier::new(mesh, &view, seed, AmplifyOptions::default());
+        match args.get(5) {
+            Some(dir) => {
+                let set = load_exemplar_dir(std::path::Path::new(dir))
+                    .unwrap_or_else(|e| panic!("{dir}: {e}"));
+                amp.with_exemplars(set, seed, AmplifyOptions::default())
+            }
+            None => amp,
+        }
+    };
+    let plain = amplifier();
+    let carved = amplifier().with_valleys(net.valley_network());
     let px = parse_resolution("100m", radius).expect("resolution");
     let g = GeoGrid::region(b[0], b[1], b[2], b[3], px).expect("region");
     let (w, h) = (g.width as usize, g.height as usize);
@@ -74,7 +88,7 @@ fn main() {
                 n[k][1] += usize::from(depths[i] > depth);
             }
         }
-        if let (Some(path), "valleys") = (args.get(4), name) {
+        if let (Some(path), "valleys") = (args.get(4).filter(|p| !p.is_empty()), name) {
             write_pits(path, &z, &depths, w, h, depth);
         }
         let pct = |c: [usize; 2]| 100.0 * c[1] as f64 / c[0].max(1) as f64;

@@ -9,7 +9,9 @@ use common::*;
 use glam::DVec3;
 use tectonic_planets::geometry::angle_between;
 use tectonic_planets::prelude::*;
-use tectonic_planets::resources::{FrontPoints, Sutures};
+use tectonic_planets::resources::convergence::NONE;
+use tectonic_planets::resources::{ConvergenceField, FrontPoints, Sutures};
+use tectonic_planets::systems::relief::ReliefState;
 
 const R: f64 = 6370.0;
 
@@ -76,6 +78,63 @@ fn meridian_90(mesh: &SphereMesh) -> Vec<usize> {
     (0..mesh.len())
         .filter(|&i| mesh.positions[i].x.abs() < 0.03 && mesh.positions[i].y > 0.0)
         .collect()
+}
+
+/// Under oblique convergence the floor slides along the front by hundreds of km between
+/// resamplings; the trench still runs along the whole front. (Tested against the sample's own
+/// front point alone, as before, most of the floor at the front had slid beside another point's
+/// stretch and was left out: the trench came out a dotted line.)
+#[test]
+fn oblique_convergence_keeps_the_trench_continuous() {
+    // The southern plate turns about a pole halfway between X and Z: at longitude 90° it moves
+    // north into the continent at 57 mm/yr and west along the front at as much.
+    let mut sim = two_hemispheres(
+        80_000,
+        (DVec3::X + DVec3::Z).normalize(),
+        80.0,
+        |_| continent(0.3),
+        |_| ocean(-4.5, 100.0),
+    );
+    sim.set_enabled("sediment", false).unwrap();
+    // Ten steps a resampling: stop at the ninth step after one, 20 My = about 1,000 km of slide.
+    sim.run_steps(10).unwrap();
+    while sim.clock().steps_since_resample < 9 {
+        sim.run_steps(1).unwrap();
+    }
+    let w = sim.world();
+    let (crust, field, fp) = (
+        w.resource::<Crust>(),
+        w.resource::<ConvergenceField>(),
+        w.resource::<FrontPoints>(),
+    );
+    let trench = &w.resource::<ReliefState>().trench_km;
+    // Floor that has come to an active front: within 16 km of it (its distance at the last
+    // resampling less the convergence since), where the trench is at full depth; along the
+    // stretch between longitudes 30° and 150°, away from the front's ends, where the motion turns
+    // parallel to it (at 0° and 180°) and the trench ends.
+    let positions = &sim.mesh().positions;
+    let (mut at_front, mut cut) = (0usize, 0usize);
+    for (i, (&sp, &t)) in field.subducting_point.iter().zip(trench).enumerate() {
+        if sp == NONE || crust.crust_type[i] != CrustType::Oceanic || !fp.active[sp as usize] {
+            continue;
+        }
+        let f = positions[fp.sample[sp as usize] as usize];
+        if !(30.0..150.0).contains(&f.y.atan2(f.x).to_degrees()) {
+            continue;
+        }
+        let d = field.subducting_distance_km[i] - fp.converged_km[sp as usize];
+        if d.abs() < 16.0 {
+            at_front += 1;
+            cut += usize::from(t > 0.0);
+        }
+    }
+    assert!(at_front > 40, "only {at_front} samples at the front");
+    let share = cut as f64 / at_front as f64;
+    assert!(
+        share > 0.95,
+        "the trench is cut at {cut} of {at_front} samples at the front ({:.0}%)",
+        100.0 * share
+    );
 }
 
 #[test]

@@ -70,9 +70,7 @@ use crate::gpu::isostasy::isostasy_dispatch;
 use crate::gpu::{FieldMask, GpuContext, pull_or_record, run_or_record};
 use crate::resources::convergence::NONE;
 use crate::resources::params::Params;
-use crate::resources::{
-    ConvergenceField, Crust, CrustType, FrontPoints, NO_PLATE, PlateTable, StepTimings,
-};
+use crate::resources::{ConvergenceField, Crust, CrustType, FrontPoints, PlateTable, StepTimings};
 
 /// The isostasy constants of `params`.
 pub fn isostasy_params(params: &Params) -> IsostasyParams {
@@ -868,6 +866,157 @@ fn subducted_passages(
         });
 }
 
+/// The active front points of the step in the world frame, bucketed in a uniform grid over the
+/// cube around the unit sphere, to ask whether a subducting sample stands in front of a front its
+/// plate goes under, beside the stretch a point stands for: at most `width + spacing` behind the
+/// point (against its normal), at most `width + 2·spacing` ahead of it, and at most half its
+/// length plus two spacings to its side (a sample's front point comes from a graph search and can
+/// sit more than one spacing to the side).
+struct FrontReach {
+    /// Per point: world position, world normal, half its stretch with the slack (km), and the
+    /// subducting plate; `None` for an inactive point or one whose plate is gone.
+    points: Vec<Option<(glam::DVec3, glam::DVec3, f64, u32)>>,
+    /// The points of each cell (`start[c]..start[c + 1]` of `in_cell`), cells in x, y, z order.
+    start: Vec<u32>,
+    in_cell: Vec<u32>,
+    /// Cells along an axis, and their size in unit-sphere units: twice the farthest a sample
+    /// can stand from a point that accepts it, so a sample's ball meets at most two cells along
+    /// each axis.
+    cells: usize,
+    cell: f64,
+    r_km: f64,
+    behind_km: f64,
+    ahead_km: f64,
+}
+
+impl FrontReach {
+    fn new(
+        fp: &FrontPoints,
+        table: &PlateTable,
+        positions: &[glam::DVec3],
+        r_km: f64,
+        width_km: f64,
+        spacing_km: f64,
+    ) -> Self {
+        let (behind_km, ahead_km) = (width_km + spacing_km, width_km + 2.0 * spacing_km);
+        let points: Vec<_> = (0..fp.len())
+            .map(|k| {
+                if !fp.active.get(k).copied().unwrap_or(false) {
+                    return None;
+                }
+                let o = table.get(fp.overriding[k])?;
+                let p = positions.get(fp.sample[k] as usize)?;
+                let half = 0.5 * f64::from(fp.length_km[k]) + 2.0 * spacing_km;
+                Some((
+                    o.world_from_plate * *p,
+                    o.world_from_plate * fp.normal[k],
+                    half,
+                    fp.subducting[k],
+                ))
+            })
+            .collect();
+        let half_max = points.iter().flatten().fold(0.0f64, |m, p| m.max(p.2));
+        let reach = behind_km.max(ahead_km).hypot(half_max) / r_km;
+        // At most 64 cells an axis (a coarser grid only lists more points a cell).
+        let cells = ((2.0 / (2.0 * reach)).floor() as usize).clamp(1, 64);
+        let cell = 2.0 / cells as f64;
+        let mut me = Self {
+            points,
+            start: vec![0; cells * cells * cells + 1],
+            in_cell: Vec::new(),
+            cells,
+            cell,
+            r_km,
+            behind_km,
+            ahead_km,
+        };
+        let keys: Vec<Option<usize>> = me
+            .points
+            .iter()
+            .map(|p| p.map(|p| me.cell_of(me.axis(p.0))))
+            .collect();
+        for &c in keys.iter().flatten() {
+            me.start[c + 1] += 1;
+        }
+        for c in 0..me.start.len() - 1 {
+            me.start[c + 1] += me.start[c];
+        }
+        let mut fill = me.start.clone();
+        me.in_cell = vec![0; *me.start.last().unwrap_or(&0) as usize];
+        for (k, c) in keys.iter().enumerate() {
+            if let Some(c) = *c {
+                me.in_cell[fill[c] as usize] = k as u32;
+                fill[c] += 1;
+            }
+        }
+        me
+    }
+
+    /// Cell coordinates of `p` along each axis (clamped into the grid) and the fraction of the
+    /// cell where it lies.
+    fn axis(&self, p: glam::DVec3) -> [(usize, f64); 3] {
+        let f = |x: f64| {
+            let t = ((x + 1.0) / self.cell).clamp(0.0, self.cells as f64 - 1e-9);
+            (t.floor() as usize, t.fract())
+        };
+        [f(p.x), f(p.y), f(p.z)]
+    }
+
+    fn cell_of(&self, a: [(usize, f64); 3]) -> usize {
+        (a[0].0 * self.cells + a[1].0) * self.cells + a[2].0
+    }
+
+    /// Whether the sample of plate `plate` at world position `q` stands in front of point `k`
+    /// (active, of a front that plate goes under), beside its stretch.
+    #[inline]
+    fn beside(&self, q: glam::DVec3, plate: u32, k: usize) -> bool {
+        let Some(&Some((p, nrm, half, sub))) = self.points.get(k) else {
+            return false;
+        };
+        let off = (q - p) * self.r_km;
+        let ahead = off.dot(nrm);
+        sub == plate
+            && ahead >= -self.behind_km
+            && ahead <= self.ahead_km
+            && off.dot(nrm.cross(p)).abs() <= half
+    }
+
+    /// Whether the sample of plate `plate` at world position `q` stands in front of an active
+    /// point of a front that plate goes under, beside that point's stretch; its own front point
+    /// `own` is tried first.
+    fn faces(&self, q: glam::DVec3, plate: u32, own: usize) -> bool {
+        if self.beside(q, plate, own) {
+            return true;
+        }
+        let a = self.axis(q);
+        // The cell of `q` and, along each axis, the neighbour on the side `q` lies nearer to.
+        let pick = |(c, t): (usize, f64)| {
+            let other = if t < 0.5 {
+                c.checked_sub(1)
+            } else {
+                Some(c + 1)
+            };
+            [Some(c), other.filter(|&o| o < self.cells)]
+        };
+        let (xs, ys, zs) = (pick(a[0]), pick(a[1]), pick(a[2]));
+        for x in xs.into_iter().flatten() {
+            for y in ys.into_iter().flatten() {
+                for z in zs.into_iter().flatten() {
+                    let c = (x * self.cells + y) * self.cells + z;
+                    let (from, to) = (self.start[c] as usize, self.start[c + 1] as usize);
+                    if self.in_cell[from..to]
+                        .iter()
+                        .any(|&k| self.beside(q, plate, k as usize))
+                    {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+}
+
 /// Trench depth (km below the floor beside it) of a subducting ocean sample whose distance to
 /// its front is `d_km` (negative once it passed under): `depth·(1 − |d|/w)²` within `w` of the
 /// front, deepest at the front. Past the front the sample lies under the overriding plate; the
@@ -964,10 +1113,14 @@ pub fn apply_isostasy(
     }
     // Trench depth per sample, from the current fronts: on the subducting crust that has come
     // to the front (distance to it at the last resampling less the convergence since), and only
-    // on the side the front faces. A sample behind its front point (more than the trench's
-    // width past it, against the front's normal) is not coming to that front: around a plate a
-    // few samples wide, whose single front point is every subducting sample's nearest, the
-    // trench would otherwise close into a ring at the convergence's distance.
+    // where the sample now stands in front of an active point of a front its plate goes under,
+    // beside the stretch of front that point stands for ([`FrontReach`]). Around a plate a few
+    // samples wide, whose single front point is every subducting sample's nearest, the trench
+    // would otherwise close into a ring at the convergence's distance. Any point of the front
+    // will do, not only the sample's own: oblique convergence carries the floor sideways along
+    // the front by hundreds of km between resamplings, and tested against its own point alone
+    // most of a trench's samples stood beside another point's stretch (the trench came out a
+    // dotted line).
     state.trench_km.clear();
     state.trench_km.resize(n, 0.0);
     if field.subducting_point.len() == n && !fp.is_empty() && host.plate.len() >= n {
@@ -975,15 +1128,7 @@ pub fn apply_isostasy(
         let r_km = mesh.radius_km;
         let spacing = mesh.mean_spacing_rad() * r_km;
         let table = PlateTable::from_query(&plates);
-        // Each front point's world position and normal (from the overriding plate's frame).
-        let front: Vec<Option<(glam::DVec3, glam::DVec3)>> = (0..fp.len())
-            .map(|k| {
-                let o = table.get(fp.overriding[k])?;
-                let p = mesh.positions.get(fp.sample[k] as usize)?;
-                Some((o.world_from_plate * *p, o.world_from_plate * fp.normal[k]))
-            })
-            .collect();
-        let behind_km = width + spacing;
+        let reach = FrontReach::new(&fp, &table, &mesh.positions, r_km, width, spacing);
         let positions = &mesh.positions;
         let plate = &host.plate;
         state
@@ -996,29 +1141,17 @@ pub fn apply_isostasy(
                 let Some(d) = to_front_km(&field, &fp, oceanic, i) else {
                     return;
                 };
-                let d = d as f64;
-                let sp = field.subducting_point[i];
-                let depth_here = trench_depth_on_mesh_km(d, depth, width, spacing);
+                let depth_here = trench_depth_on_mesh_km(f64::from(d), depth, width, spacing);
                 if depth_here == 0.0 {
-                    return; // beyond the trench: no need to place the sample against its front
+                    return; // beyond the trench: no need to place the sample against a front
                 }
-                let faces = match (front[sp as usize], plate[i]) {
-                    (Some((w, nrm)), pl) if pl != NO_PLATE => match table.get(pl) {
-                        Some(s) => {
-                            let off = s.world_from_plate * positions[i] - w;
-                            // Ahead of the front, and beside the stretch of front the point
-                            // stands for: a plate a few samples wide has one front point, and
-                            // its trench is that stretch, not an arc around the plate. Two
-                            // spacings of slack, because a sample's front point comes from a
-                            // graph search and can sit more than one spacing to the side.
-                            let along = nrm.cross(w);
-                            off.dot(nrm) * r_km >= -behind_km
-                                && off.dot(along).abs() * r_km
-                                    <= 0.5 * fp.length_km[sp as usize] as f64 + 2.0 * spacing
-                        }
-                        None => true,
-                    },
-                    _ => true,
+                let faces = match table.get(plate[i]) {
+                    Some(s) => reach.faces(
+                        s.world_from_plate * positions[i],
+                        plate[i],
+                        field.subducting_point[i] as usize,
+                    ),
+                    None => true,
                 };
                 if faces {
                     *t = depth_here as f32;

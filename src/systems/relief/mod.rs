@@ -973,12 +973,12 @@ impl FrontReach {
         let Some(&Some((p, nrm, half, sub))) = self.points.get(k) else {
             return false;
         };
+        if sub != plate {
+            return false;
+        }
         let off = (q - p) * self.r_km;
         let ahead = off.dot(nrm);
-        sub == plate
-            && ahead >= -self.behind_km
-            && ahead <= self.ahead_km
-            && off.dot(nrm.cross(p)).abs() <= half
+        ahead >= -self.behind_km && ahead <= self.ahead_km && off.dot(nrm.cross(p)).abs() <= half
     }
 
     /// Whether the sample of plate `plate` at world position `q` stands in front of an active

@@ -1016,17 +1016,10 @@ impl SedimentRouter {
                 }
                 q -= step;
                 level = cb;
-            } else {
-                // Lower ground of the floor (the pond rose past it): it fills to the level.
-                q -= (level - cb) * g.area_km2[bnd] / ff(bnd);
             }
-            self.pond.push(bnd as u32);
-            self.pond_mark[bnd] = in_pond;
-            inv += g.area_km2[bnd] / ff(bnd);
-            if q <= 0.0 {
-                // Filling the lower ground took more than was left: the level settles lower.
-                level += q / inv;
-                q = 0.0;
+            // Lower ground of the floor (the pond rose past it) fills to the level; when that
+            // takes more than was left, the level settles lower.
+            if self.join_pond(g, bnd, cb, in_pond, ff, (&mut q, &mut inv, &mut level)) {
                 break;
             }
         }
@@ -1037,6 +1030,31 @@ impl SedimentRouter {
     /// Puts the neighbours of the pond's newest sample that `admit` lets in, and that are not in
     /// the pond (`pond_mark` = `in_pond`) or its boundary (`in_pond + 1`) yet, on the boundary
     /// heap, keyed by their current surface.
+    /// Sample `bnd`, whose surface `cb` lies at or under the pond's level, joins the pond and
+    /// fills up to the level from the volume left `q` (km³); `inv` (km³ per km of rise) grows
+    /// by its area. Returns true when filling it took all of `q`: the level then settles lower
+    /// by what was missing, and `q` is 0.
+    fn join_pond(
+        &mut self,
+        g: &ReliefGraph,
+        bnd: usize,
+        cb: f64,
+        in_pond: u32,
+        ff: &dyn Fn(usize) -> f64,
+        (q, inv, level): (&mut f64, &mut f64, &mut f64),
+    ) -> bool {
+        *q -= (*level - cb) * g.area_km2[bnd] / ff(bnd);
+        self.pond.push(bnd as u32);
+        self.pond_mark[bnd] = in_pond;
+        *inv += g.area_km2[bnd] / ff(bnd);
+        if *q <= 0.0 {
+            *level += *q / *inv;
+            *q = 0.0;
+            return true;
+        }
+        false
+    }
+
     fn push_boundary(
         &mut self,
         g: &ReliefGraph,
@@ -1124,13 +1142,7 @@ impl SedimentRouter {
                 // A lower sample that drains to this sink (eroded below it this step, or a
                 // slope the pond rose past before reaching it) joins the pond: the basin fills
                 // its lowest ground first.
-                q -= (level - cb) * g.area_km2[bnd] / ff(bnd);
-                self.pond.push(bnd as u32);
-                self.pond_mark[bnd] = in_pond;
-                inv += g.area_km2[bnd] / ff(bnd);
-                if q <= 0.0 {
-                    level += q / inv;
-                    q = 0.0;
+                if self.join_pond(g, bnd, cb, in_pond, ff, (&mut q, &mut inv, &mut level)) {
                     break;
                 }
                 continue;

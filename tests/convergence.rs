@@ -137,6 +137,95 @@ fn oblique_convergence_keeps_the_trench_continuous() {
     );
 }
 
+/// A plate a few samples wide has a single front point that is every subducting sample's
+/// nearest: the trench stays on the side it faces and never wraps the plate in a ring (where
+/// the floor's distance to it at the last resampling less the convergence since is near zero).
+#[test]
+fn a_small_plate_gets_a_trench_in_front_not_a_ring() {
+    let mut p = params(80_000, 3);
+    p.init.continental_fraction = 0.0;
+    p.rifting.frequency_per_my = 0.0;
+    p.resample.min_interval_steps = 10;
+    p.resample.max_interval_steps = 10;
+    let mut sim = Simulation::new(p).unwrap();
+    let mesh = sim.mesh().clone();
+    // A continental cap 250 km across at (0, 1, 0), at rest; the ocean around it moves north
+    // (about the X axis) at 60 mm/yr, into the cap's southern side.
+    let centre = DVec3::Y;
+    let in_cap = |q: DVec3| angle_between(q, centre) * R < 250.0;
+    {
+        let mut crust = sim.world_mut().resource_mut::<Crust>();
+        for i in 0..mesh.len() {
+            let cap = in_cap(mesh.positions[i]);
+            crust.crust_type[i] = if cap {
+                CrustType::Continental
+            } else {
+                CrustType::Oceanic
+            };
+            crust.elevation_km[i] = if cap { 0.5 } else { -4.5 };
+            crust.age_my[i] = if cap { 1000.0 } else { 60.0 };
+            crust.thickness_km[i] = if cap { 35.0 } else { 7.0 };
+        }
+    }
+    let plates: Vec<u32> = mesh
+        .positions
+        .iter()
+        .map(|&q| if in_cap(q) { 0 } else { 1 })
+        .collect();
+    let rest = PlateMotion {
+        euler_pole: DVec3::Z,
+        angular_speed_rad_per_my: 0.0,
+    };
+    let north = PlateMotion {
+        euler_pole: DVec3::X,
+        angular_speed_rad_per_my: 60.0 / R,
+    };
+    sim.reassign_plates(plates, &[(0, rest), (1, north)])
+        .unwrap();
+    sim.set_enabled("sediment", false).unwrap();
+    // Nine steps after a resampling the floor has moved about 1,000 km past the cap.
+    sim.run_steps(10).unwrap();
+    while sim.clock().steps_since_resample < 9 {
+        sim.run_steps(1).unwrap();
+    }
+    let frames: Vec<(u32, glam::DQuat)> = {
+        let w = sim.world_mut();
+        let mut q = w.query::<(&Plate, &PlateFrame)>();
+        q.iter(w)
+            .map(|(p, f)| (p.id.0, f.world_from_plate))
+            .collect()
+    };
+    let w = sim.world();
+    let crust = w.resource::<Crust>();
+    let trench = &w.resource::<ReliefState>().trench_km;
+    // The cap's centre now, and every trench sample's bearing from it: the trench faces south
+    // (the side the ocean comes from), within a half-plane.
+    let world = |i: usize| {
+        let f = frames.iter().find(|f| f.0 == crust.plate[i]).map(|f| f.1);
+        f.unwrap_or(glam::DQuat::IDENTITY) * mesh.positions[i]
+    };
+    let (mut south, mut elsewhere) = (0usize, 0usize);
+    for (i, &t) in trench.iter().enumerate() {
+        if t <= 0.0 {
+            continue;
+        }
+        let q = world(i);
+        if angle_between(q, centre) * R > 1500.0 {
+            continue; // a front elsewhere on the globe
+        }
+        if q.z < centre.z - 0.1 * 250.0 / R {
+            south += 1;
+        } else {
+            elsewhere += 1;
+        }
+    }
+    assert!(south > 0, "no trench in front of the cap");
+    assert!(
+        elsewhere * 10 <= south,
+        "{elsewhere} trench samples beside or behind the cap, {south} in front"
+    );
+}
+
 #[test]
 fn ocean_under_continent_makes_a_trench_and_an_andean_range() {
     let mut sim = two_hemispheres(

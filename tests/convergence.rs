@@ -15,6 +15,46 @@ use tectonic_planets::systems::relief::ReliefState;
 
 const R: f64 = 6370.0;
 
+/// Two plates: 0 = the samples where `first` holds, 1 = the rest, moving as given; `crust` sets
+/// each sample's crust (type, elevation km, age My). No random rift may break them, and they
+/// resample every 10 steps.
+fn two_plates(
+    samples: u64,
+    first: impl Fn(DVec3) -> bool,
+    motions: [PlateMotion; 2],
+    crust: impl Fn(DVec3) -> (CrustType, f32, f32),
+) -> Simulation {
+    let mut p = params(samples, 3);
+    p.init.continental_fraction = 0.0;
+    p.rifting.frequency_per_my = 0.0;
+    p.resample.min_interval_steps = 10;
+    p.resample.max_interval_steps = 10;
+    let mut sim = Simulation::new(p).unwrap();
+    let mesh = sim.mesh().clone();
+    {
+        let mut c = sim.world_mut().resource_mut::<Crust>();
+        for i in 0..mesh.len() {
+            let (t, z, a) = crust(mesh.positions[i]);
+            c.crust_type[i] = t;
+            c.elevation_km[i] = z;
+            c.age_my[i] = a;
+            c.thickness_km[i] = if t == CrustType::Continental {
+                35.0
+            } else {
+                7.0
+            };
+        }
+    }
+    let plates: Vec<u32> = mesh
+        .positions
+        .iter()
+        .map(|&q| if first(q) { 0 } else { 1 })
+        .collect();
+    sim.reassign_plates(plates, &[(0, motions[0]), (1, motions[1])])
+        .unwrap();
+    sim
+}
+
 /// Two plates: 0 = northern hemisphere (at rest), 1 = southern hemisphere turning about `pole`
 /// at `speed` mm/yr, so that it pushes north into plate 0 around longitude 90°. `north` and
 /// `south` set each sample's crust (type, elevation km, age My).
@@ -25,46 +65,23 @@ fn two_hemispheres(
     north: impl Fn(DVec3) -> (CrustType, f32, f32),
     south: impl Fn(DVec3) -> (CrustType, f32, f32),
 ) -> Simulation {
-    let mut p = params(samples, 3);
-    p.init.continental_fraction = 0.0;
-    // Two hand-made hemispheres: no random rift may break them.
-    p.rifting.frequency_per_my = 0.0;
-    p.resample.min_interval_steps = 10;
-    p.resample.max_interval_steps = 10;
-    let mut sim = Simulation::new(p).unwrap();
-    let mesh = sim.mesh().clone();
-    {
-        let mut crust = sim.world_mut().resource_mut::<Crust>();
-        for i in 0..mesh.len() {
-            let q = mesh.positions[i];
-            let (t, z, a) = if q.z >= 0.0 { north(q) } else { south(q) };
-            crust.crust_type[i] = t;
-            crust.elevation_km[i] = z;
-            crust.age_my[i] = a;
-            crust.thickness_km[i] = if t == CrustType::Continental {
-                35.0
-            } else {
-                7.0
-            };
-        }
-    }
-    let plates: Vec<u32> = mesh
-        .positions
-        .iter()
-        .map(|q| if q.z >= 0.0 { 0 } else { 1 })
-        .collect();
-    let rest = PlateMotion {
-        euler_pole: DVec3::Z,
-        angular_speed_rad_per_my: 0.0,
-    };
     let moving = PlateMotion {
         euler_pole: pole,
         angular_speed_rad_per_my: speed_mm_per_yr / R,
     };
-    sim.reassign_plates(plates, &[(0, rest), (1, moving)])
-        .unwrap();
-    sim
+    two_plates(
+        samples,
+        |q| q.z >= 0.0,
+        [REST, moving],
+        |q| if q.z >= 0.0 { north(q) } else { south(q) },
+    )
 }
+
+/// A plate at rest.
+const REST: PlateMotion = PlateMotion {
+    euler_pole: DVec3::Z,
+    angular_speed_rad_per_my: 0.0,
+};
 
 fn continent(z: f32) -> (CrustType, f32, f32) {
     (CrustType::Continental, z, 1000.0)
@@ -142,46 +159,22 @@ fn oblique_convergence_keeps_the_trench_continuous() {
 /// the floor's distance to it at the last resampling less the convergence since is near zero).
 #[test]
 fn a_small_plate_gets_a_trench_in_front_not_a_ring() {
-    let mut p = params(80_000, 3);
-    p.init.continental_fraction = 0.0;
-    p.rifting.frequency_per_my = 0.0;
-    p.resample.min_interval_steps = 10;
-    p.resample.max_interval_steps = 10;
-    let mut sim = Simulation::new(p).unwrap();
-    let mesh = sim.mesh().clone();
     // A continental cap 250 km across at (0, 1, 0), at rest; the ocean around it moves north
     // (about the X axis) at 60 mm/yr, into the cap's southern side.
     let centre = DVec3::Y;
     let in_cap = |q: DVec3| angle_between(q, centre) * R < 250.0;
-    {
-        let mut crust = sim.world_mut().resource_mut::<Crust>();
-        for i in 0..mesh.len() {
-            let cap = in_cap(mesh.positions[i]);
-            crust.crust_type[i] = if cap {
-                CrustType::Continental
-            } else {
-                CrustType::Oceanic
-            };
-            crust.elevation_km[i] = if cap { 0.5 } else { -4.5 };
-            crust.age_my[i] = if cap { 1000.0 } else { 60.0 };
-            crust.thickness_km[i] = if cap { 35.0 } else { 7.0 };
-        }
-    }
-    let plates: Vec<u32> = mesh
-        .positions
-        .iter()
-        .map(|&q| if in_cap(q) { 0 } else { 1 })
-        .collect();
-    let rest = PlateMotion {
-        euler_pole: DVec3::Z,
-        angular_speed_rad_per_my: 0.0,
-    };
     let north = PlateMotion {
         euler_pole: DVec3::X,
         angular_speed_rad_per_my: 60.0 / R,
     };
-    sim.reassign_plates(plates, &[(0, rest), (1, north)])
-        .unwrap();
+    let mut sim = two_plates(80_000, in_cap, [REST, north], |q| {
+        if in_cap(q) {
+            continent(0.5)
+        } else {
+            ocean(-4.5, 60.0)
+        }
+    });
+    let mesh = sim.mesh().clone();
     sim.set_enabled("sediment", false).unwrap();
     // Nine steps after a resampling the floor has moved about 1,000 km past the cap.
     sim.run_steps(10).unwrap();

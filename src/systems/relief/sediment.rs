@@ -246,6 +246,24 @@ fn surface_km(
     z + ff(j) * dep[j] / g.area_km2[j].max(1e-12)
 }
 
+/// Raises a pond of `inv` km³ per km of rise from `level` towards `target` (km) with the volume
+/// left `q` (km³). Returns true when `q` ran out on the way (the level stops short, `q` is 0);
+/// otherwise the level reaches the target (unchanged when already above it).
+fn rise_pond(target: f64, inv: f64, q: &mut f64, level: &mut f64) -> bool {
+    if target <= *level {
+        return false;
+    }
+    let need = (target - *level) * inv;
+    if *q <= need {
+        *level += *q / inv;
+        *q = 0.0;
+        return true;
+    }
+    *q -= need;
+    *level = target;
+    false
+}
+
 impl SedimentRouter {
     /// New router; buffers grow on first use.
     pub fn new() -> Self {
@@ -1007,15 +1025,8 @@ impl SedimentRouter {
             };
             let bnd = (key & 0xffff_ffff) as usize;
             let cb = cur(&self.dep, bnd).min(wl);
-            if cb > level {
-                let step = (cb - level) * inv;
-                if q <= step {
-                    level += q / inv;
-                    q = 0.0;
-                    break;
-                }
-                q -= step;
-                level = cb;
+            if rise_pond(cb, inv, &mut q, &mut level) {
+                break;
             }
             // Lower ground of the floor (the pond rose past it) fills to the level; when that
             // takes more than was left, the level settles lower.
@@ -1027,9 +1038,6 @@ impl SedimentRouter {
         q
     }
 
-    /// Puts the neighbours of the pond's newest sample that `admit` lets in, and that are not in
-    /// the pond (`pond_mark` = `in_pond`) or its boundary (`in_pond + 1`) yet, on the boundary
-    /// heap, keyed by their current surface.
     /// Sample `bnd`, whose surface `cb` lies at or under the pond's level, joins the pond and
     /// fills up to the level from the volume left `q` (km³); `inv` (km³ per km of rise) grows
     /// by its area. Returns true when filling it took all of `q`: the level then settles lower
@@ -1055,6 +1063,9 @@ impl SedimentRouter {
         false
     }
 
+    /// Puts the neighbours of the pond's newest sample that `admit` lets in, and that are not in
+    /// the pond (`pond_mark` = `in_pond`) or its boundary (`in_pond + 1`) yet, on the boundary
+    /// heap, keyed by their current surface.
     fn push_boundary(
         &mut self,
         g: &ReliefGraph,
@@ -1156,15 +1167,8 @@ impl SedimentRouter {
                 }
                 continue;
             }
-            if cb > level {
-                let need = (cb - level) * inv;
-                if q <= need {
-                    level += q / inv;
-                    q = 0.0;
-                    break;
-                }
-                q -= need;
-                level = cb;
+            if rise_pond(cb, inv, &mut q, &mut level) {
+                break;
             }
             if on_land && !joins {
                 // The basin's pass (full to here; the lowest ground of another basin, or of the

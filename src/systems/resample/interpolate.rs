@@ -216,14 +216,23 @@ pub fn displace_overridden_continents(
 enum Spread {
     /// Only through and into this plate's samples.
     Within(u32),
-    /// Through any plate, next to this plate's continent; the samples it turns join this plate.
+    /// Through this plate's continent only, into the ocean of any plate beside it; the samples it
+    /// turns join this plate (and carry the walk on), so the claim grows as a band along the
+    /// coast nearest the overlap.
     Claim(u32),
     /// Through any plate, next to any continent; the samples keep their plate.
     Anywhere,
 }
 
-/// Breadth-first from `starts`, turns up to `debt` oceanic samples next to continental ones into
-/// continental crust with the elevation and orogeny of that neighbour. Returns the debt left.
+/// Breadth-first from `starts` (continental samples), turns up to `debt` oceanic samples next to
+/// continental ones into continental crust with the elevation and orogeny of that neighbour.
+/// Returns the debt left.
+///
+/// Every sample the walk leaves from is continental (a start, crust it walks through, or a sample
+/// it turned), so while debt is left every ocean sample it reaches is turned, nearest the starts
+/// first: the new crust grows as a band, never as a line running out across the ocean. (A claim
+/// that walked through other plates' ocean once marked ocean reached from ocean as seen, so only
+/// the tip of its front stayed turnable and it paid out as a crack two samples wide.)
 fn spread_continent(
     mesh: &SphereMesh,
     next: &mut Crust,
@@ -232,65 +241,34 @@ fn spread_continent(
     spread: Spread,
     visited: &mut [bool],
 ) -> usize {
-    let plate = match spread {
-        Spread::Within(p) => Some(p),
-        Spread::Claim(_) | Spread::Anywhere => None,
-    };
     let mut queue: std::collections::VecDeque<u32> = starts.iter().copied().collect();
     for &s in starts {
         visited[s as usize] = true;
     }
-    // A claim that cannot be paid walks the whole globe (most of a resampling's time when it
-    // happened). Past `CLAIM_WATCH` samples, the claim keeps count of the samples it could still
-    // turn (unvisited ocean next to the claiming plate's continent; only a turned sample adds
-    // any) and stops when none is left: what it would visit after that changes nothing.
-    const CLAIM_WATCH: usize = 16_384;
-    let mut discovered = starts.len();
-    let mut watch: Option<(Vec<bool>, usize)> = None;
     while let Some(u) = queue.pop_front() {
         if debt == 0 {
             break;
         }
-        if let Spread::Claim(p) = spread {
-            if watch.is_none() && discovered > CLAIM_WATCH {
-                let mut open = vec![false; next.len()];
-                let mut count = 0;
-                for s in 0..next.len() {
-                    if next.plate[s] == p && next.crust_type[s] == CrustType::Continental {
-                        mark_claimable(mesh, next, visited, &mut open, &mut count, s);
-                    }
-                }
-                watch = Some((open, count));
-            }
-            if watch.as_ref().is_some_and(|w| w.1 == 0) {
-                break;
-            }
-        }
         let u = u as usize;
         for &v in mesh.neighbors_of(u) {
             let v = v as usize;
-            if visited[v] || plate.is_some_and(|p| next.plate[v] != p) || next.plate[v] == NO_PLATE
-            {
+            if visited[v] || next.plate[v] == NO_PLATE {
+                continue;
+            }
+            let oceanic = next.crust_type[v] == CrustType::Oceanic;
+            let walkable = match spread {
+                Spread::Within(p) => next.plate[v] == p,
+                Spread::Claim(p) => oceanic || next.plate[v] == p,
+                Spread::Anywhere => true,
+            };
+            if !walkable {
                 continue;
             }
             visited[v] = true;
-            discovered += 1;
-            if let Some((open, count)) = watch.as_mut()
-                && open[v]
-            {
-                open[v] = false;
-                *count -= 1;
-            }
-            // When claiming, only ocean right next to the claiming plate's own continent.
-            let owner_ok = match spread {
-                Spread::Within(_) | Spread::Anywhere => true,
-                Spread::Claim(p) => next.plate[u] == p,
-            };
-            if next.crust_type[v] == CrustType::Oceanic
-                && debt > 0
-                && next.crust_type[u] == CrustType::Continental
-                && owner_ok
-            {
+            if oceanic && next.crust_type[u] == CrustType::Continental {
+                if debt == 0 {
+                    break;
+                }
                 next.crust_type[v] = CrustType::Continental;
                 next.elevation_km[v] = next.elevation_km[u].max(0.0);
                 // The crust it continues: no thin spot in a thickened orogen (with isostasy
@@ -301,9 +279,6 @@ fn spread_continent(
                 next.fold_dir[v] = next.fold_dir[u];
                 if let Spread::Claim(p) = spread {
                     next.plate[v] = p;
-                    if let Some((open, count)) = watch.as_mut() {
-                        mark_claimable(mesh, next, visited, open, count, v);
-                    }
                 }
                 debt -= 1;
             }
@@ -313,25 +288,93 @@ fn spread_continent(
     debt
 }
 
-/// Marks in `open` (and counts) the unvisited oceanic samples next to continental sample `u`
-/// that a claim could still turn (see [`spread_continent`]).
-fn mark_claimable(
-    mesh: &SphereMesh,
-    next: &Crust,
-    visited: &[bool],
-    open: &mut [bool],
-    count: &mut usize,
-    u: usize,
-) {
-    for &v in mesh.neighbors_of(u) {
-        let v = v as usize;
-        if !visited[v]
-            && !open[v]
-            && next.plate[v] != NO_PLATE
-            && next.crust_type[v] == CrustType::Oceanic
-        {
-            open[v] = true;
-            *count += 1;
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Hops from every sample to the nearest sample in `from` (through any sample).
+    fn hops_from(mesh: &SphereMesh, from: impl Iterator<Item = usize>) -> Vec<u32> {
+        let mut hops = vec![u32::MAX; mesh.len()];
+        let mut queue = std::collections::VecDeque::new();
+        for s in from {
+            hops[s] = 0;
+            queue.push_back(s);
         }
+        while let Some(u) = queue.pop_front() {
+            for &v in mesh.neighbors_of(u) {
+                if hops[v as usize] == u32::MAX {
+                    hops[v as usize] = hops[u] + 1;
+                    queue.push_back(v as usize);
+                }
+            }
+        }
+        hops
+    }
+
+    /// A plate that is all continent owes continent where it lost its core, which the other
+    /// plate's continent rings: the claim must come as a band on the nearest coast, not as a line
+    /// running out across the ocean (seen on the default planet at 61° N before the claim walked
+    /// through its own continent only). The plate's continent reaches the ocean only at a small
+    /// cap, at the end of an isthmus through the other plate's continent.
+    #[test]
+    fn a_claim_grows_a_band_on_its_coast_not_a_crack() {
+        let mesh = SphereMesh::fibonacci(20_000, 0.5, 3, 6371.0).expect("mesh");
+        let mut next = Crust::with_len(mesh.len());
+        let cap = DVec3::new(0.5, 0.0, 0.75_f64.sqrt());
+        let deg = |p: &DVec3, c: DVec3| p.dot(c).clamp(-1.0, 1.0).acos().to_degrees();
+        for (s, p) in mesh.positions.iter().enumerate() {
+            let core = deg(p, DVec3::Z);
+            let isthmus = p.x > 0.0 && p.y.abs() < 0.03 && core < 30.0;
+            let (plate, crust) = if core < 8.0 || isthmus || deg(p, cap) < 3.0 {
+                (1, CrustType::Continental)
+            } else if core < 12.0 || (p.x > 0.0 && p.y.abs() < 0.12 && core < 25.0) {
+                (2, CrustType::Continental)
+            } else {
+                (3, CrustType::Oceanic)
+            };
+            next.plate[s] = plate;
+            next.crust_type[s] = crust;
+            next.thickness_km[s] = if crust == CrustType::Continental {
+                35.0
+            } else {
+                7.0
+            };
+        }
+        // Plate 1 lost its core.
+        let mut sources = vec![SampleSource::GAP; mesh.len()];
+        let mut lost = 0;
+        for s in 0..mesh.len() {
+            sources[s].plate = next.plate[s];
+            if deg(&mesh.positions[s], DVec3::Z) < 8.0 {
+                sources[s].continental_lost = true;
+                lost += 1;
+            }
+        }
+        assert!(lost > 30, "{lost} samples lost");
+        let before = next.clone();
+        displace_overridden_continents(&mesh, &sources, &mut next);
+
+        let turned: Vec<usize> = (0..mesh.len())
+            .filter(|&s| {
+                before.crust_type[s] == CrustType::Oceanic
+                    && next.crust_type[s] == CrustType::Continental
+            })
+            .collect();
+        assert_eq!(turned.len(), lost, "every lost sample paid back");
+        assert!(turned.iter().all(|&s| next.plate[s] == 1));
+        // A band as compact as it can be: the notch's ocean in front of plate 1's coast, no
+        // sample farther from that coast than a disc of the debt's area would reach.
+        let coast = hops_from(
+            &mesh,
+            (0..mesh.len()).filter(|&s| {
+                before.plate[s] == 1 && before.crust_type[s] == CrustType::Continental
+            }),
+        );
+        let reach = ((lost as f64 / std::f64::consts::PI).sqrt().ceil() as u32) + 1;
+        let far = turned.iter().map(|&s| coast[s]).max().unwrap();
+        assert!(
+            far <= reach,
+            "a turned sample {far} hops from the claiming continent (a disc of the debt reaches {reach})"
+        );
     }
 }

@@ -307,10 +307,7 @@ fn continents_move_with_their_plates() {
             .iter()
             .filter(|&&i| {
                 let loc = mesh.locate(back * mesh.positions[i]);
-                let k = (0..3)
-                    .max_by(|&a, &b| loc.weights[a].total_cmp(&loc.weights[b]))
-                    .unwrap();
-                let j = mesh.triangles[loc.triangle as usize][k] as usize;
+                let j = mesh.triangles[loc.triangle as usize][loc.dominant_corner()] as usize;
                 c0.crust_type[j] != CrustType::Continental || c0.plate[j] != plate
             })
             .map(|&i| mesh.area_km2[i])

@@ -362,8 +362,8 @@ mod tests {
             .collect();
         assert_eq!(turned.len(), lost, "every lost sample paid back");
         assert!(turned.iter().all(|&s| next.plate[s] == 1));
-        // A band as compact as it can be: the notch's ocean in front of plate 1's coast, no
-        // sample farther from that coast than a disc of the debt's area would reach.
+        // A band as compact as it can be: no turned sample farther from plate 1's continent than
+        // a disc of the debt's area would reach.
         let coast = hops_from(
             &mesh,
             (0..mesh.len()).filter(|&s| {

@@ -51,9 +51,15 @@ const FAULT_WIDTH_KM: f32 = 4.0;
 const FAULT_DEPTH_M: f32 = 300.0;
 const FAULT_OFFSET_KM: f32 = 2.0;
 const OCEAN_DETAIL_M: f32 = 20.0;
+// The sea floor's relief grows to its full amplitude over this depth (procedural.rs: ocean_share).
+const OCEAN_FULL_DEPTH_M: f32 = 2000.0;
 const PLAIN_WAVELENGTH_KM: f32 = 30.0;
 const PLAIN_AMP_M: f32 = 90.0;
 const PLAIN_DETAIL_M: f32 = 12.0;
+// Low plains are flat: the relief grows to its full amplitude over this crust elevation, and keeps
+// at least PLAIN_LOW_SHARE of it (procedural.rs: plain_share).
+const PLAIN_FULL_HEIGHT_M: f32 = 300.0;
+const PLAIN_LOW_SHARE: f32 = 0.05;
 const ANDEAN_WAVELENGTH_KM: f32 = 14.0;
 const ANDEAN_STRETCH: f32 = 3.0;
 const ANDEAN_AMP_M: f32 = 1300.0;
@@ -231,12 +237,15 @@ fn vertex_relief(v: AmplifyVertex, p: vec3<f32>) -> vec2<f32> {
         // segment offset across the ridge.
         let hills = fbm2(seed, x / (OCEAN_HILL_WAVELENGTH_KM * OCEAN_HILL_STRETCH),
             (y + shift) / OCEAN_HILL_WAVELENGTH_KM, 3u, kept_octaves(OCEAN_HILL_WAVELENGTH_KM, 3u), 0.5);
-        let relief = young * (OCEAN_HILL_AMP_M * 1.4 * hills - FAULT_DEPTH_M * (trough - trough_mean));
-        return vec2<f32>(relief, OCEAN_DETAIL_M);
+        let share = clamp(-v.elevation_m / OCEAN_FULL_DEPTH_M, PLAIN_LOW_SHARE, 1.0);
+        let relief = share * young
+            * (OCEAN_HILL_AMP_M * 1.4 * hills - FAULT_DEPTH_M * (trough - trough_mean));
+        return vec2<f32>(relief, share * OCEAN_DETAIL_M);
     } else if (v.kind == KIND_PLAIN) {
         let n = fbm2(seed ^ 0x1b873593u, x / PLAIN_WAVELENGTH_KM, y / PLAIN_WAVELENGTH_KM, 4u,
             kept_octaves(PLAIN_WAVELENGTH_KM, 4u), 0.5);
-        return vec2<f32>(PLAIN_AMP_M * 1.4 * n, PLAIN_DETAIL_M);
+        let share = clamp(v.elevation_m / PLAIN_FULL_HEIGHT_M, PLAIN_LOW_SHARE, 1.0);
+        return vec2<f32>(share * PLAIN_AMP_M * 1.4 * n, share * PLAIN_DETAIL_M);
     }
     let him = v.kind == KIND_HIMALAYAN;
     var wl = ANDEAN_WAVELENGTH_KM;
@@ -249,7 +258,8 @@ fn vertex_relief(v: AmplifyVertex, p: vec3<f32>) -> vec2<f32> {
         amp0 = HIMALAYAN_AMP_M;
         mseed = seed ^ 0xcc9e2d51u;
     }
-    let height = clamp(v.elevation_m / MOUNTAIN_FULL_HEIGHT_M, 0.1, 1.0);
+    let height = clamp(v.elevation_m / MOUNTAIN_FULL_HEIGHT_M, 0.1, 1.0)
+        * clamp(v.elevation_m / PLAIN_FULL_HEIGHT_M, PLAIN_LOW_SHARE, 1.0);
     let fresh = exp(-max(v.age_my, 0.0) / OROGENY_OLD_AGE_MY);
     let amp = amp0 * height * (0.35 + 0.65 * fresh);
     let gain = 0.35 + 0.2 * fresh;

@@ -504,6 +504,81 @@ fn shipped_exemplars_load() {
     assert!((700.0..900.0).contains(&relief), "relief {relief} m");
 }
 
+/// Amplified elevations over a patch 90 km across at lat 0, lon 30, of a crust that is all
+/// `crust_type` at `elevation_km` (a plain, or ocean floor 20 My old, its ridges north–south).
+fn uniform_patch(crust_type: CrustType, elevation_km: f32) -> Vec<f32> {
+    let mesh = SphereMesh::fibonacci(20_000, 0.5, 7, RADIUS_KM).unwrap();
+    let mut c = Crust::with_len(mesh.len());
+    for (i, &p) in mesh.positions.iter().enumerate() {
+        let (_, north) = east_north(p);
+        c.plate[i] = 0;
+        c.crust_type[i] = crust_type;
+        c.elevation_km[i] = elevation_km;
+        c.thickness_km[i] = if crust_type == CrustType::Continental {
+            35.0
+        } else {
+            7.0
+        };
+        c.age_my[i] = 20.0;
+        c.ridge_dir[i] = [north.x as f32, north.y as f32, north.z as f32];
+    }
+    let amp = Amplifier::new(&mesh, &c, 3, AmplifyOptions::default());
+    let centre = from_lat_lon_deg(0.0, 30.0);
+    let (east, north) = east_north(centre);
+    let mut out = Vec::new();
+    for i in 0..40 {
+        for j in 0..40 {
+            let off = east * (i as f64 * 2.3) + north * (j as f64 * 2.3);
+            out.push(amp.elevation_m((centre + off / RADIUS_KM).normalize()));
+        }
+    }
+    out
+}
+
+/// Low land is flat and stays out of the sea, shallow sea floor stays under it: a plain 20 m
+/// above the sea (continental, or ocean floor filled to above it) has no point under the sea and
+/// varies by metres, a plain at 600 m by tens of metres; ocean floor 100 m deep breaks the surface
+/// nowhere, ocean floor 4 km deep keeps its abyssal hills. (With one amplitude at every height,
+/// the low plain's noise dipped ±100 m under the sea as specks of water, and shallow floor's hills
+/// stood out of it as specks of land.)
+#[test]
+fn low_plains_are_flat_and_shallow_floor_stays_under_the_sea() {
+    let spread = |v: &[f32]| {
+        let m = v.iter().map(|&z| f64::from(z)).sum::<f64>() / v.len() as f64;
+        (v.iter().map(|&z| (f64::from(z) - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
+    };
+    let low = uniform_patch(CrustType::Continental, 0.02);
+    let high = uniform_patch(CrustType::Continental, 0.6);
+    let filled = uniform_patch(CrustType::Oceanic, 0.02);
+    assert!(
+        low.iter().all(|&z| z > 0.0),
+        "low plain under the sea: {:?}",
+        low.iter().copied().fold(f32::MAX, f32::min)
+    );
+    assert!(
+        filled.iter().all(|&z| z > 0.0),
+        "filled basin under the sea: {:?}",
+        filled.iter().copied().fold(f32::MAX, f32::min)
+    );
+    let (s_low, s_high) = (spread(&low), spread(&high));
+    assert!(
+        s_high > 15.0 && s_low < 0.2 * s_high,
+        "plain relief: {s_low:.1} m at 20 m, {s_high:.1} m at 600 m"
+    );
+    let shallow = uniform_patch(CrustType::Oceanic, -0.1);
+    let deep = uniform_patch(CrustType::Oceanic, -4.0);
+    assert!(
+        shallow.iter().all(|&z| z < 0.0),
+        "shallow floor out of the sea: {:?}",
+        shallow.iter().copied().fold(f32::MIN, f32::max)
+    );
+    let (s_shallow, s_deep) = (spread(&shallow), spread(&deep));
+    assert!(
+        s_deep > 50.0 && s_shallow < 0.2 * s_deep,
+        "floor relief: {s_shallow:.1} m at 100 m deep, {s_deep:.1} m at 4 km"
+    );
+}
+
 #[test]
 fn amplify_cpu_matches_the_point_function_and_keeps_bounds() {
     let (mesh, crust) = synthetic(20_000, false, 10.0);

@@ -76,8 +76,10 @@ pub fn build_vertices(mesh: &SphereMesh, crust: &Crust, seed: u64) -> Vec<Amplif
         .into_par_iter()
         .map(|i| {
             let p = mesh.positions[i];
-            let continental = crust.crust_type[i] == CrustType::Continental;
-            let (kind, dir, age) = if continental {
+            // Land relief on continents and on oceanic crust above the sea (arcs, basins filled
+            // to above it); abyssal hills only on the sea floor.
+            let land = crust.crust_type[i] == CrustType::Continental || crust.elevation_km[i] > 0.0;
+            let (kind, dir, age) = if land {
                 let kind = match crust.orogeny[i] {
                     Orogeny::None => KIND_PLAIN,
                     Orogeny::Andean => KIND_ANDEAN,

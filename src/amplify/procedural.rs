@@ -57,9 +57,19 @@ const FAULT_WIDTH_KM: f32 = 4.0;
 const FAULT_DEPTH_M: f32 = 300.0;
 const FAULT_OFFSET_KM: f32 = 2.0;
 const OCEAN_DETAIL_M: f32 = 20.0;
+/// Depth over which the sea floor's relief grows to its full amplitude, metres: abyssal hills
+/// stand on the deep floor; floor filled with sediment to near the sea is flat, and its hills do
+/// not break the surface as specks of land.
+const OCEAN_FULL_DEPTH_M: f32 = 2000.0;
 const PLAIN_WAVELENGTH_KM: f32 = 30.0;
 const PLAIN_AMP_M: f32 = 90.0;
 const PLAIN_DETAIL_M: f32 = 12.0;
+/// Crust elevation over which a plain's relief grows to its full amplitude, metres: low plains
+/// (coastal plains, deltas, basins filled to near the sea, shelves) are flat, and their noise
+/// does not dip under the sea as specks of water.
+const PLAIN_FULL_HEIGHT_M: f32 = 300.0;
+/// Least share of its full amplitude a plain keeps (at and below sea level).
+const PLAIN_LOW_SHARE: f32 = 0.05;
 const ANDEAN_WAVELENGTH_KM: f32 = 14.0;
 const ANDEAN_STRETCH: f32 = 3.0;
 const ANDEAN_AMP_M: f32 = 1300.0;
@@ -300,9 +310,11 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
             kept_octaves(u, OCEAN_HILL_WAVELENGTH_KM, 3),
             0.5,
         );
-        let relief =
-            young * (OCEAN_HILL_AMP_M * 1.4 * hills - FAULT_DEPTH_M * (trough - trough_mean));
-        (relief, OCEAN_DETAIL_M)
+        let share = ocean_share(v.elevation_m);
+        let relief = share
+            * young
+            * (OCEAN_HILL_AMP_M * 1.4 * hills - FAULT_DEPTH_M * (trough - trough_mean));
+        (relief, share * OCEAN_DETAIL_M)
     } else if v.kind == KIND_PLAIN {
         let n = fbm2(
             seed ^ 0x1b87_3593,
@@ -312,7 +324,8 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
             kept_octaves(u, PLAIN_WAVELENGTH_KM, 4),
             0.5,
         );
-        (PLAIN_AMP_M * 1.4 * n, PLAIN_DETAIL_M)
+        let share = plain_share(v.elevation_m);
+        (share * PLAIN_AMP_M * 1.4 * n, share * PLAIN_DETAIL_M)
     } else {
         let him = v.kind == KIND_HIMALAYAN;
         let (wl, stretch, amp0) = if him {
@@ -320,7 +333,7 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
         } else {
             (ANDEAN_WAVELENGTH_KM, ANDEAN_STRETCH, ANDEAN_AMP_M)
         };
-        let height = (v.elevation_m / MOUNTAIN_FULL_HEIGHT_M).clamp(0.1, 1.0);
+        let height = mountain_share(v.elevation_m);
         let fresh = (-v.age_my.max(0.0) / OROGENY_OLD_AGE_MY).exp();
         let amp = amp0 * height * (0.35 + 0.65 * fresh);
         let gain = 0.35 + 0.2 * fresh;
@@ -365,16 +378,34 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
 /// floor gives its abyssal hills' amplitude; what [`super::valleys`] incises its beds by.
 pub fn relief_amplitude_m(v: &AmplifyVertex) -> f32 {
     if v.kind == KIND_OCEAN {
-        OCEAN_HILL_AMP_M
+        ocean_share(v.elevation_m) * OCEAN_HILL_AMP_M
     } else if v.kind == KIND_PLAIN {
-        PLAIN_AMP_M
+        plain_share(v.elevation_m) * PLAIN_AMP_M
     } else {
         let him = v.kind == KIND_HIMALAYAN;
         let amp0 = if him { HIMALAYAN_AMP_M } else { ANDEAN_AMP_M };
-        let height = (v.elevation_m / MOUNTAIN_FULL_HEIGHT_M).clamp(0.1, 1.0);
+        let height = mountain_share(v.elevation_m);
         let fresh = (-v.age_my.max(0.0) / OROGENY_OLD_AGE_MY).exp();
         amp0 * height * (0.35 + 0.65 * fresh)
     }
+}
+
+/// Share of the sea floor's full relief at crust elevation `elevation_m` (see
+/// [`OCEAN_FULL_DEPTH_M`]).
+fn ocean_share(elevation_m: f32) -> f32 {
+    (-elevation_m / OCEAN_FULL_DEPTH_M).clamp(PLAIN_LOW_SHARE, 1.0)
+}
+
+/// Share of a range's full relief at crust elevation `elevation_m`: its height over
+/// [`MOUNTAIN_FULL_HEIGHT_M`], at least a tenth, and as flat as a plain near the sea (an old
+/// orogen worn to the sea, an arc just out of it).
+fn mountain_share(elevation_m: f32) -> f32 {
+    (elevation_m / MOUNTAIN_FULL_HEIGHT_M).clamp(0.1, 1.0) * plain_share(elevation_m)
+}
+
+/// Share of a plain's full relief at crust elevation `elevation_m` (see [`PLAIN_FULL_HEIGHT_M`]).
+fn plain_share(elevation_m: f32) -> f32 {
+    (elevation_m / PLAIN_FULL_HEIGHT_M).clamp(PLAIN_LOW_SHARE, 1.0)
 }
 
 /// The isotropic detail layer at unit direction `p`, in about [-1, 1] (two octaves of 3D

@@ -95,20 +95,24 @@ fn lag_correlation(
     cov / (va * vb).sqrt()
 }
 
-fn std_relief(amp: &Amplifier, centre: DVec3) -> f64 {
+/// A patch of 40 × 40 points 2.3 km apart, east and north of `centre`.
+fn patch(centre: DVec3) -> Vec<DVec3> {
     let (east, north) = east_north(centre);
-    let mut v = Vec::new();
-    for i in 0..40 {
-        for j in 0..40 {
+    (0..40)
+        .flat_map(|i| (0..40).map(move |j| (i, j)))
+        .map(|(i, j)| {
             let off = east * (i as f64 * 2.3) + north * (j as f64 * 2.3);
-            v.push(relief_at(
-                amp,
-                (centre + off / RADIUS_KM).normalize(),
-                east,
-                0.0,
-            ));
-        }
-    }
+            (centre + off / RADIUS_KM).normalize()
+        })
+        .collect()
+}
+
+fn std_relief(amp: &Amplifier, centre: DVec3) -> f64 {
+    let (east, _) = east_north(centre);
+    let v: Vec<f64> = patch(centre)
+        .into_iter()
+        .map(|p| relief_at(amp, p, east, 0.0))
+        .collect();
     let m = v.iter().sum::<f64>() / v.len() as f64;
     (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
 }
@@ -504,7 +508,7 @@ fn shipped_exemplars_load() {
     assert!((700.0..900.0).contains(&relief), "relief {relief} m");
 }
 
-/// Amplified elevations over a patch 90 km across at lat 0, lon 30, of a crust that is all
+/// Amplified elevations over a [`patch`] at lat 0, lon 30, of a crust that is all
 /// `crust_type` at `elevation_km` (a plain, or ocean floor 20 My old, its ridges north–south).
 fn uniform_patch(crust_type: CrustType, elevation_km: f32) -> Vec<f32> {
     let mesh = SphereMesh::fibonacci(20_000, 0.5, 7, RADIUS_KM).unwrap();
@@ -523,16 +527,10 @@ fn uniform_patch(crust_type: CrustType, elevation_km: f32) -> Vec<f32> {
         c.ridge_dir[i] = [north.x as f32, north.y as f32, north.z as f32];
     }
     let amp = Amplifier::new(&mesh, &c, 3, AmplifyOptions::default());
-    let centre = from_lat_lon_deg(0.0, 30.0);
-    let (east, north) = east_north(centre);
-    let mut out = Vec::new();
-    for i in 0..40 {
-        for j in 0..40 {
-            let off = east * (i as f64 * 2.3) + north * (j as f64 * 2.3);
-            out.push(amp.elevation_m((centre + off / RADIUS_KM).normalize()));
-        }
-    }
-    out
+    patch(from_lat_lon_deg(0.0, 30.0))
+        .into_iter()
+        .map(|p| amp.elevation_m(p))
+        .collect()
 }
 
 /// Low land is flat and stays out of the sea, shallow sea floor stays under it: a plain 20 m

@@ -204,6 +204,11 @@ fn fbm2(seed: u32, x: f32, y: f32, octaves: u32, kept: u32, gain: f32) -> f32 {
 }
 
 // (relief m, detail amplitude m) of one vertex's primitive at unit direction p.
+// Share of a plain's full relief at crust elevation `z` (procedural.rs: plain_share).
+fn plain_share(z: f32) -> f32 {
+    return clamp(z / PLAIN_FULL_HEIGHT_M, PLAIN_LOW_SHARE, 1.0);
+}
+
 fn vertex_relief(v: AmplifyVertex, p: vec3<f32>) -> vec2<f32> {
     let r = params.radius_km;
     let d = vec3<f32>((p.x - v.px) * r, (p.y - v.py) * r, (p.z - v.pz) * r);
@@ -244,7 +249,7 @@ fn vertex_relief(v: AmplifyVertex, p: vec3<f32>) -> vec2<f32> {
     } else if (v.kind == KIND_PLAIN) {
         let n = fbm2(seed ^ 0x1b873593u, x / PLAIN_WAVELENGTH_KM, y / PLAIN_WAVELENGTH_KM, 4u,
             kept_octaves(PLAIN_WAVELENGTH_KM, 4u), 0.5);
-        let share = clamp(v.elevation_m / PLAIN_FULL_HEIGHT_M, PLAIN_LOW_SHARE, 1.0);
+        let share = plain_share(v.elevation_m);
         return vec2<f32>(share * PLAIN_AMP_M * 1.4 * n, share * PLAIN_DETAIL_M);
     }
     let him = v.kind == KIND_HIMALAYAN;
@@ -259,7 +264,7 @@ fn vertex_relief(v: AmplifyVertex, p: vec3<f32>) -> vec2<f32> {
         mseed = seed ^ 0xcc9e2d51u;
     }
     let height = clamp(v.elevation_m / MOUNTAIN_FULL_HEIGHT_M, 0.1, 1.0)
-        * clamp(v.elevation_m / PLAIN_FULL_HEIGHT_M, PLAIN_LOW_SHARE, 1.0);
+        * plain_share(v.elevation_m);
     let fresh = exp(-max(v.age_my, 0.0) / OROGENY_OLD_AGE_MY);
     let amp = amp0 * height * (0.35 + 0.65 * fresh);
     let gain = 0.35 + 0.2 * fresh;

@@ -513,16 +513,13 @@ fn shipped_exemplars_load() {
 fn uniform_patch(crust_type: CrustType, elevation_km: f32) -> Vec<f32> {
     let mesh = SphereMesh::fibonacci(20_000, 0.5, 7, RADIUS_KM).unwrap();
     let mut c = Crust::with_len(mesh.len());
+    let params = Params::default();
     for (i, &p) in mesh.positions.iter().enumerate() {
         let (_, north) = east_north(p);
         c.plate[i] = 0;
         c.crust_type[i] = crust_type;
         c.elevation_km[i] = elevation_km;
-        c.thickness_km[i] = if crust_type == CrustType::Continental {
-            35.0
-        } else {
-            7.0
-        };
+        c.thickness_km[i] = params.nominal_thickness_km(crust_type) as f32;
         c.age_my[i] = 20.0;
         c.ridge_dir[i] = [north.x as f32, north.y as f32, north.z as f32];
     }
@@ -545,18 +542,20 @@ fn low_plains_are_flat_and_shallow_floor_stays_under_the_sea() {
         let m = v.iter().map(|&z| f64::from(z)).sum::<f64>() / v.len() as f64;
         (v.iter().map(|&z| (f64::from(z) - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
     };
+    let lowest = |v: &[f32]| v.iter().copied().fold(f32::MAX, f32::min);
+    let highest = |v: &[f32]| v.iter().copied().fold(f32::MIN, f32::max);
     let low = uniform_patch(CrustType::Continental, 0.02);
     let high = uniform_patch(CrustType::Continental, 0.6);
     let filled = uniform_patch(CrustType::Oceanic, 0.02);
     assert!(
-        low.iter().all(|&z| z > 0.0),
-        "low plain under the sea: {:?}",
-        low.iter().copied().fold(f32::MAX, f32::min)
+        lowest(&low) > 0.0,
+        "low plain under the sea: {}",
+        lowest(&low)
     );
     assert!(
-        filled.iter().all(|&z| z > 0.0),
-        "filled basin under the sea: {:?}",
-        filled.iter().copied().fold(f32::MAX, f32::min)
+        lowest(&filled) > 0.0,
+        "filled basin under the sea: {}",
+        lowest(&filled)
     );
     let (s_low, s_high) = (spread(&low), spread(&high));
     assert!(
@@ -566,9 +565,9 @@ fn low_plains_are_flat_and_shallow_floor_stays_under_the_sea() {
     let shallow = uniform_patch(CrustType::Oceanic, -0.1);
     let deep = uniform_patch(CrustType::Oceanic, -4.0);
     assert!(
-        shallow.iter().all(|&z| z < 0.0),
-        "shallow floor out of the sea: {:?}",
-        shallow.iter().copied().fold(f32::MIN, f32::max)
+        highest(&shallow) < 0.0,
+        "shallow floor out of the sea: {}",
+        highest(&shallow)
     );
     let (s_shallow, s_deep) = (spread(&shallow), spread(&deep));
     assert!(

@@ -29,6 +29,7 @@ fn two_plates(
     p.rifting.frequency_per_my = 0.0;
     p.resample.min_interval_steps = 10;
     p.resample.max_interval_steps = 10;
+    let nominal = p.clone();
     let mut sim = Simulation::new(p).unwrap();
     let mesh = sim.mesh().clone();
     {
@@ -38,11 +39,7 @@ fn two_plates(
             c.crust_type[i] = t;
             c.elevation_km[i] = z;
             c.age_my[i] = a;
-            c.thickness_km[i] = if t == CrustType::Continental {
-                35.0
-            } else {
-                7.0
-            };
+            c.thickness_km[i] = nominal.nominal_thickness_km(t) as f32;
         }
     }
     let plates: Vec<u32> = mesh

@@ -49,11 +49,7 @@ pub fn motion_of(w: DVec3, fallback_pole: DVec3) -> PlateMotion {
 
 /// Mass (area × nominal thickness, km³) of a sample of `area_km2` and crust type `ct`.
 pub fn sample_mass(ct: CrustType, area_km2: f64, params: &Params) -> f64 {
-    let t = match ct {
-        CrustType::Continental => params.init.continental_thickness_km,
-        CrustType::Oceanic => params.init.oceanic_thickness_km,
-    };
-    area_km2 * t
+    area_km2 * params.nominal_thickness_km(ct)
 }
 
 /// Inertia tensor Σ m (E − p pᵀ) of point masses `(unit position, mass)`.

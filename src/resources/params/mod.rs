@@ -372,6 +372,15 @@ pub fn oceanic_load_gain(params: &Params) -> f64 {
 }
 
 impl Params {
+    /// Nominal thickness of crust of type `ct` (`init.continental_thickness_km` or
+    /// `init.oceanic_thickness_km`), km: what new crust of that type is made with.
+    pub fn nominal_thickness_km(&self, ct: crate::resources::CrustType) -> f64 {
+        match ct {
+            crate::resources::CrustType::Continental => self.init.continental_thickness_km,
+            crate::resources::CrustType::Oceanic => self.init.oceanic_thickness_km,
+        }
+    }
+
     /// Every parameter, in declaration order (section by section).
     pub fn schema() -> &'static [ParamSpec] {
         SCHEMA

@@ -320,6 +320,7 @@ mod tests {
     fn a_claim_grows_a_band_on_its_coast_not_a_crack() {
         let mesh = SphereMesh::fibonacci(20_000, 0.5, 3, 6371.0).expect("mesh");
         let mut next = Crust::with_len(mesh.len());
+        let params = crate::resources::Params::default();
         let cap = DVec3::new(0.5, 0.0, 0.75_f64.sqrt());
         let deg = |p: &DVec3, c: DVec3| p.dot(c).clamp(-1.0, 1.0).acos().to_degrees();
         for (s, p) in mesh.positions.iter().enumerate() {
@@ -334,11 +335,7 @@ mod tests {
             };
             next.plate[s] = plate;
             next.crust_type[s] = crust;
-            next.thickness_km[s] = if crust == CrustType::Continental {
-                35.0
-            } else {
-                7.0
-            };
+            next.thickness_km[s] = params.nominal_thickness_km(crust) as f32;
         }
         // Plate 1 lost its core.
         let mut sources = vec![SampleSource::GAP; mesh.len()];

@@ -1276,3 +1276,17 @@ fn a_run_with_a_fixed_water_volume_resumes_exactly() {
     );
     assert_resumes_exactly(&p, TOTAL, &[7, 13], &mut straight);
 }
+
+/// With the surface processes on one step in three (`time.relief_interval_steps = 3`), a run
+/// resumed from saves made on steps with and without them ends in the same bits as a straight
+/// run: whether a step runs them follows from the step count, and nothing they keep between
+/// their runs needs saving.
+#[test]
+fn a_run_with_the_surface_processes_every_third_step_resumes_exactly() {
+    const TOTAL: u64 = 20;
+    let mut p = small_params(10_000, 6);
+    p.time.relief_interval_steps = 3;
+    let mut straight = Simulation::new(p.clone()).unwrap();
+    straight.run_steps(TOTAL).unwrap();
+    assert_resumes_exactly(&p, TOTAL, &[6, 7, 11], &mut straight);
+}

@@ -39,7 +39,8 @@ impl Plugin for ClimatePlugin {
             (
                 relief::update_climate
                     .run_if(phenomenon_enabled(CLIMATE))
-                    .run_if(phenomenon_enabled(DRAINAGE)),
+                    .run_if(phenomenon_enabled(DRAINAGE))
+                    .run_if(relief::relief_due),
                 relief::clear_climate.run_if(not(phenomenon_enabled(CLIMATE))),
             )
                 .chain()

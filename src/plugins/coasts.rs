@@ -37,7 +37,8 @@ impl Plugin for CoastsPlugin {
             coast::erode_coasts
                 .in_set(TectonicSystems::Coasts)
                 .run_if(phenomenon_enabled(COASTS))
-                .run_if(phenomenon_enabled(DRAINAGE)),
+                .run_if(phenomenon_enabled(DRAINAGE))
+                .run_if(relief::relief_due),
         );
     }
 }

@@ -33,7 +33,8 @@ impl Plugin for DrainagePlugin {
             TectonicStep,
             relief::build_drainage
                 .in_set(TectonicSystems::Drainage)
-                .run_if(phenomenon_enabled(DRAINAGE)),
+                .run_if(phenomenon_enabled(DRAINAGE))
+                .run_if(relief::relief_due),
         );
     }
 }

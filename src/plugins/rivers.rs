@@ -35,7 +35,8 @@ impl Plugin for RiversPlugin {
             relief::erode_rivers
                 .in_set(TectonicSystems::Rivers)
                 .run_if(phenomenon_enabled(RIVERS))
-                .run_if(phenomenon_enabled(DRAINAGE)),
+                .run_if(phenomenon_enabled(DRAINAGE))
+                .run_if(relief::relief_due),
         );
     }
 }

@@ -35,7 +35,8 @@ impl Plugin for SedimentPlugin {
             relief::deposit_sediment
                 .in_set(TectonicSystems::Sediment)
                 .run_if(phenomenon_enabled(SEDIMENT))
-                .run_if(phenomenon_enabled(DRAINAGE)),
+                .run_if(phenomenon_enabled(DRAINAGE))
+                .run_if(relief::relief_due),
         );
     }
 }

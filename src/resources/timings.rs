@@ -45,6 +45,22 @@ impl StepTimings {
             0.5 * (ms[n / 2 - 1] + ms[n / 2])
         })
     }
+    /// How many durations are recorded under `name` (at most the history kept).
+    pub fn count(&self, name: &str) -> usize {
+        self.per_set.get(name).map_or(0, Vec::len)
+    }
+    /// Mean of the durations recorded under `name` from the `from`-th to the one before the
+    /// `to`-th (in recording order), milliseconds: what a set costs a step on average over
+    /// those steps when it runs only on some of them (the surface processes with
+    /// `time.relief_interval_steps` above 1), where the median says nothing.
+    pub fn mean_ms(&self, name: &str, from: usize, to: usize) -> Option<f64> {
+        let v = self.per_set.get(name)?;
+        let v = v.get(from..to.min(v.len()))?;
+        if v.is_empty() {
+            return None;
+        }
+        Some(v.iter().map(|d| d.as_secs_f64() * 1e3).sum::<f64>() / v.len() as f64)
+    }
     /// Names with recorded timings.
     pub fn names(&self) -> impl Iterator<Item = &'static str> + '_ {
         self.per_set.keys().copied()

@@ -259,7 +259,7 @@ pub fn erode_coasts(
         &mut crust.thickness_km,
         &mut flux.eroded_km,
         &coast_params(&params),
-        params.time.time_step_my,
+        super::relief_dt_my(&params),
         &mut state.scratch,
     );
     flux.coastal_km3 = volume;

@@ -70,7 +70,24 @@ use crate::gpu::isostasy::isostasy_dispatch;
 use crate::gpu::{FieldMask, GpuContext, pull_or_record, run_or_record};
 use crate::resources::convergence::NONE;
 use crate::resources::params::Params;
-use crate::resources::{ConvergenceField, Crust, CrustType, FrontPoints, PlateTable, StepTimings};
+use crate::resources::{
+    ConvergenceField, Crust, CrustType, FrontPoints, PlateTable, SimClock, StepTimings,
+};
+
+/// The time one run of the surface processes covers, My: the time step times
+/// `time.relief_interval_steps` (they run on one step in that many, see [`relief_due`]).
+pub fn relief_dt_my(params: &Params) -> f64 {
+    params.time.time_step_my * params.time.relief_interval_steps.max(1) as f64
+}
+
+/// Run condition of the surface processes (climate, drainage, rivers, coasts, sediment): true on
+/// the first step and then on every `time.relief_interval_steps`-th, counted from the start of
+/// the run (so a resumed save keeps the same steps).
+pub fn relief_due(clock: Res<SimClock>, params: Res<Params>) -> bool {
+    clock
+        .step
+        .is_multiple_of(params.time.relief_interval_steps.max(1))
+}
 
 /// The isostasy constants of `params`.
 pub fn isostasy_params(params: &Params) -> IsostasyParams {
@@ -584,7 +601,7 @@ pub fn erode_rivers(
             declared = g.can_declare_host_write(WRITES, crust.len(), tick);
         }
     }
-    let dt = params.time.time_step_my;
+    let dt = relief_dt_my(&params);
     let spl = stream_power_params(&params);
     let kappa = params.rivers.hillslope_diffusivity_km2_per_my;
     let state = &mut *state;
@@ -771,7 +788,7 @@ pub fn deposit_sediment(
     // Pelagic rain (plankton shells, dust): sea floor younger than the age cap gains
     // `sediment.pelagic_rate_m_per_my`; it comes from the sea, not the land, so it is counted
     // apart from the eroded-deposited balance.
-    let rate_km = params.sediment.pelagic_rate_m_per_my * 1e-3 * params.time.time_step_my;
+    let rate_km = params.sediment.pelagic_rate_m_per_my * 1e-3 * relief_dt_my(&params);
     let max_age = params.sediment.pelagic_max_age_my as f32;
     if rate_km > 0.0 {
         let ocean = &network.drainage.ocean;

@@ -10,7 +10,8 @@ use bevy_app::{App, Plugin};
 use bevy_ecs::prelude::*;
 
 use super::schedule::{
-    Phenomenon, PhenomenonAppExt, TectonicStep, TectonicSystems, phenomenon_enabled,
+    AfterResample, AfterResampleSystems, Phenomenon, PhenomenonAppExt, TectonicStep,
+    TectonicSystems, phenomenon_enabled,
 };
 use crate::resources::{
     Crust, CrustType, Params, SaveAppExt, SaveSection, SectionError, SectionReader, SectionWriter,
@@ -45,6 +46,20 @@ impl Plugin for IsostasyPlugin {
             relief::apply_isostasy
                 .in_set(TectonicSystems::Isostasy)
                 .run_if(phenomenon_enabled(ISOSTASY)),
+        );
+        // A resampling interpolates the elevation, trenches included, from where the samples
+        // were: the trench of floor gone under the overriding plate is lost and what is left shows
+        // as lenses. The elevation is derived again on the new crust, with the fronts rebuilt.
+        app.add_systems(
+            AfterResample,
+            (
+                crate::systems::convergence::fronts::refresh_fronts,
+                relief::apply_isostasy,
+            )
+                .chain()
+                .in_set(AfterResampleSystems::Relief)
+                .run_if(phenomenon_enabled(ISOSTASY))
+                .run_if(crate::systems::resample::just_resampled),
         );
     }
 }

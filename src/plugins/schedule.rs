@@ -62,6 +62,9 @@ pub enum AfterResampleSystems {
     Fronts,
     /// Plugin state that rides on the plates carried to the new plates (hotspot edifices).
     Carry,
+    /// The elevation derived again from the resampled crust (isostasy, with the rebuilt fronts'
+    /// trenches), so the maps and the next step read it rather than the interpolated one.
+    Relief,
 }
 
 /// The ordered phases of a step (see the module documentation).
@@ -231,6 +234,7 @@ impl Plugin for TectonicSchedulePlugin {
                 AfterResampleSystems::Terranes,
                 AfterResampleSystems::Fronts,
                 AfterResampleSystems::Carry,
+                AfterResampleSystems::Relief,
             )
                 .chain(),
         );
@@ -297,13 +301,16 @@ impl Plugin for TectonicSchedulePlugin {
 /// [`ResampleSystems::Rebuild`].
 pub fn run_after_resample(world: &mut World) {
     let rebuilt = world
-        .get_resource_mut::<resample::ResampleWork>()
-        .is_some_and(|mut w| std::mem::take(&mut w.rebuilt));
+        .get_resource::<resample::ResampleWork>()
+        .is_some_and(|w| w.rebuilt);
     if !rebuilt {
         return;
     }
     let t_after = Instant::now();
     let _ = world.try_run_schedule(AfterResample);
+    if let Some(mut w) = world.get_resource_mut::<resample::ResampleWork>() {
+        w.rebuilt = false;
+    }
     world
         .resource_mut::<StepTimings>()
         .record("after_resample", t_after.elapsed());

@@ -305,13 +305,38 @@ pub fn track_fronts(
     crust: Res<Crust>,
     params: Res<Params>,
     plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
+    fp: ResMut<FrontPoints>,
+    gpu: Option<ResMut<GpuContext>>,
+) {
+    let dt = params.time.time_step_my as f32;
+    track_fronts_over(dt, &mesh, &crust, &params, &plates, fp, gpu);
+}
+
+/// [`track_fronts`] without adding any convergence: after a resampling rebuilt the fronts (all
+/// inactive until then), which are active and what lies under them, for what reads them before
+/// the next step (the isostasy's trench, see `AfterResampleSystems::Relief`).
+pub fn refresh_fronts(
+    mesh: Res<SphereMesh>,
+    crust: Res<Crust>,
+    params: Res<Params>,
+    plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
+    fp: ResMut<FrontPoints>,
+    gpu: Option<ResMut<GpuContext>>,
+) {
+    track_fronts_over(0.0, &mesh, &crust, &params, &plates, fp, gpu);
+}
+
+fn track_fronts_over(
+    dt: f32,
+    mesh: &SphereMesh,
+    crust: &Crust,
+    params: &Params,
+    plates: &Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
     mut fp: ResMut<FrontPoints>,
     gpu: Option<ResMut<GpuContext>>,
 ) {
-    let crust: &Crust = &crust;
-    let table = PlateTable::from_query(&plates);
+    let table = PlateTable::from_query(plates);
     let r_km = params.planet.radius_km;
-    let dt = params.time.time_step_my as f32;
     let fp = &mut *fp;
     // Where each front point is: the triangle and weights under it in the subducting plate
     // (f64, on the CPU), whether subducting crust is there, the velocities.

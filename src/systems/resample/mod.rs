@@ -56,10 +56,18 @@ pub struct ResampleWork {
     pub continental_subducted_km2: f64,
     /// The same, summed over the whole run, km².
     pub continental_subducted_total_km2: f64,
-    /// Set when a resampling installed its crust this step; whoever runs the
-    /// [`AfterResample`](crate::plugins::AfterResample) schedule next clears it.
+    /// Set when a resampling installed its crust this step; cleared once the
+    /// [`AfterResample`](crate::plugins::AfterResample) schedule ran after it (its systems may
+    /// ask, with [`just_resampled`], whether a resampling or a new planet brought them).
     pub rebuilt: bool,
     started: Option<Instant>,
+}
+
+/// Run condition of [`AfterResample`](crate::plugins::AfterResample) systems: true when a
+/// resampling installed its crust this step (false when the schedule runs for a new planet or
+/// plates given by hand).
+pub fn just_resampled(work: Option<Res<ResampleWork>>) -> bool {
+    work.is_some_and(|w| w.rebuilt)
 }
 
 /// Run condition: a resampling is due this step (asked for, or the fastest plate has travelled

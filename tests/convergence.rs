@@ -216,8 +216,9 @@ fn a_small_plate_gets_a_trench_in_front_not_a_ring() {
     );
 }
 
-#[test]
-fn ocean_under_continent_makes_a_trench_and_an_andean_range() {
+/// The southern hemisphere's ocean floor driven north under a continent at rest (80 mm/yr at
+/// longitude 90°, about the X axis), under uniform rain and without sediment.
+fn ocean_under_a_continent() -> Simulation {
     let mut sim = two_hemispheres(
         80_000,
         DVec3::X,
@@ -226,13 +227,19 @@ fn ocean_under_continent_makes_a_trench_and_an_andean_range() {
         |_| ocean(-4.5, 100.0),
     );
     // A continent as wide as a hemisphere has a desert for an interior, which barely erodes
-    // and can stand higher than the wet coastal range: this test reads the uplift's profile,
+    // and can stand higher than the wet coastal range: the tests read the uplift's profile,
     // under uniform rain.
     sim.set_enabled("climate", false).unwrap();
     // The trench is read as cut, without sediment: a continent as wide as a hemisphere fills it
     // (with sediment on, its deepest sample stood 1.4 km below the floor beyond after 25 steps,
     // as trenches beside large rivers do; the deposit is tested in tests/relief.rs).
     sim.set_enabled("sediment", false).unwrap();
+    sim
+}
+
+#[test]
+fn ocean_under_continent_makes_a_trench_and_an_andean_range() {
+    let mut sim = ocean_under_a_continent();
     {
         let mut q = sim.world_mut().query::<&SubductionFront>();
         let fronts: Vec<SubductionFront> = q.iter(sim.world()).cloned().collect();
@@ -324,14 +331,7 @@ fn ocean_under_continent_makes_a_trench_and_an_andean_range() {
 /// subducting sample stands about a spacing from the point).
 #[test]
 fn right_after_a_resampling_the_trench_runs_along_the_whole_front() {
-    let mut sim = two_hemispheres(
-        80_000,
-        DVec3::X,
-        80.0,
-        |_| continent(0.3),
-        |_| ocean(-4.5, 100.0),
-    );
-    sim.set_enabled("sediment", false).unwrap();
+    let mut sim = ocean_under_a_continent();
     sim.run_steps(3).unwrap();
     while sim.clock().steps_since_resample != 0 {
         sim.run_steps(1).unwrap();

@@ -297,45 +297,53 @@ pub fn build_fronts(world: &mut World) {
     }
 }
 
+/// What the front tracking reads and writes.
+#[derive(bevy_ecs::system::SystemParam)]
+pub struct FrontTracking<'w, 's> {
+    mesh: Res<'w, SphereMesh>,
+    crust: Res<'w, Crust>,
+    params: Res<'w, Params>,
+    plates: Query<
+        'w,
+        's,
+        (
+            &'static Plate,
+            &'static PlateMotion,
+            &'static PlateFrame,
+            &'static PlateBounds,
+            &'static PlateStats,
+        ),
+    >,
+    fp: ResMut<'w, FrontPoints>,
+    gpu: Option<ResMut<'w, GpuContext>>,
+}
+
 /// Every step, first in the subduction set: for each front point, where the subducting plate is
 /// now, the elevation of its crust under the point, the relative velocity, and the convergence
 /// accumulated since the last resampling.
-pub fn track_fronts(
-    mesh: Res<SphereMesh>,
-    crust: Res<Crust>,
-    params: Res<Params>,
-    plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
-    fp: ResMut<FrontPoints>,
-    gpu: Option<ResMut<GpuContext>>,
-) {
-    let dt = params.time.time_step_my as f32;
-    track_fronts_over(dt, &mesh, &crust, &params, &plates, fp, gpu);
+pub fn track_fronts(t: FrontTracking) {
+    let dt = t.params.time.time_step_my as f32;
+    track_fronts_over(dt, t);
 }
 
 /// [`track_fronts`] without adding any convergence: after a resampling rebuilt the fronts (all
 /// inactive until then), which are active and what lies under them, for what reads them before
 /// the next step (the isostasy's trench, see `AfterResampleSystems::Relief`).
-pub fn refresh_fronts(
-    mesh: Res<SphereMesh>,
-    crust: Res<Crust>,
-    params: Res<Params>,
-    plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
-    fp: ResMut<FrontPoints>,
-    gpu: Option<ResMut<GpuContext>>,
-) {
-    track_fronts_over(0.0, &mesh, &crust, &params, &plates, fp, gpu);
+pub fn refresh_fronts(t: FrontTracking) {
+    track_fronts_over(0.0, t);
 }
 
-fn track_fronts_over(
-    dt: f32,
-    mesh: &SphereMesh,
-    crust: &Crust,
-    params: &Params,
-    plates: &Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
-    mut fp: ResMut<FrontPoints>,
-    gpu: Option<ResMut<GpuContext>>,
-) {
-    let table = PlateTable::from_query(plates);
+fn track_fronts_over(dt: f32, t: FrontTracking) {
+    let FrontTracking {
+        mesh,
+        crust,
+        params,
+        plates,
+        mut fp,
+        gpu,
+    } = t;
+    let (mesh, crust, params): (&SphereMesh, &Crust, &Params) = (&mesh, &crust, &params);
+    let table = PlateTable::from_query(&plates);
     let r_km = params.planet.radius_km;
     let fp = &mut *fp;
     // Where each front point is: the triangle and weights under it in the subducting plate

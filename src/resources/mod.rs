@@ -17,7 +17,7 @@ pub use convergence::{
 };
 pub use crust::{Crust, CrustType, NO_PLATE, NonFinite, Orogeny};
 pub use params::{ParamError, ParamKind, ParamSpec, ParamValue, Params};
-pub use plate_table::{PlateState, PlateTable};
+pub use plate_table::{PlateState, PlateTable, PlateTableQuery};
 pub use plugin_params::{PluginConfig, PluginParam, PluginParams, PluginParamsAppExt};
 pub use save_section::{
     LoadError, LoadErrorKind, RawSection, SaveAppExt, SaveError, SaveRegistry, SaveSection,

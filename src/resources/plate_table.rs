@@ -6,6 +6,20 @@ use glam::{DMat3, DVec3};
 
 use crate::components::{Plate, PlateBounds, PlateFrame, PlateMotion, PlateStats};
 
+/// The plate components a [`PlateTable`] is built from, as a field of a `SystemParam` struct
+/// (a system function may spell it `Query<(&Plate, &PlateMotion, ...)>`).
+pub type PlateTableQuery<'w, 's> = Query<
+    'w,
+    's,
+    (
+        &'static Plate,
+        &'static PlateMotion,
+        &'static PlateFrame,
+        &'static PlateBounds,
+        &'static PlateStats,
+    ),
+>;
+
 /// One plate, as per-sample kernels need it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlateState {

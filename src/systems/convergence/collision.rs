@@ -9,7 +9,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::propagate_nearest;
-use crate::components::{Plate, PlateBounds, PlateFrame, PlateMotion, PlateStats};
+use crate::components::{Plate, PlateFrame, PlateMotion};
 use crate::geometry::SphereMesh;
 use crate::gpu::collision_uplift::CollisionSurge;
 use crate::gpu::{GpuContext, run_or_record};
@@ -134,17 +134,7 @@ pub struct CollisionInputs<'w, 's> {
     fp: Res<'w, FrontPoints>,
     field: Res<'w, ConvergenceField>,
     terranes: Res<'w, TerraneField>,
-    plates: Query<
-        'w,
-        's,
-        (
-            &'static Plate,
-            &'static PlateMotion,
-            &'static PlateFrame,
-            &'static PlateBounds,
-            &'static PlateStats,
-        ),
-    >,
+    plates: crate::resources::PlateTableQuery<'w, 's>,
 }
 
 impl CollisionInputs<'_, '_> {

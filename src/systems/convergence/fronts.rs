@@ -303,17 +303,7 @@ pub struct FrontTracking<'w, 's> {
     mesh: Res<'w, SphereMesh>,
     crust: Res<'w, Crust>,
     params: Res<'w, Params>,
-    plates: Query<
-        'w,
-        's,
-        (
-            &'static Plate,
-            &'static PlateMotion,
-            &'static PlateFrame,
-            &'static PlateBounds,
-            &'static PlateStats,
-        ),
-    >,
+    plates: crate::resources::PlateTableQuery<'w, 's>,
     fp: ResMut<'w, FrontPoints>,
     gpu: Option<ResMut<'w, GpuContext>>,
 }

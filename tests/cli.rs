@@ -425,6 +425,72 @@ fn bench_times_steady_and_resampling_steps_apart() {
     assert_eq!(steady_gpu + resampling_gpu + after_gpu, 24, "{stdout}");
 }
 
+/// `planet bench --from SAVE` times the steps of a saved planet: it says it loaded the save and
+/// at what time, times the relief sets of the steps after it, and a missing save is a clear
+/// error naming the path.
+#[test]
+fn bench_from_a_save_times_the_saved_planet() {
+    let dir = temp_dir("bench-from");
+    std::fs::create_dir_all(&dir).unwrap();
+    let save = dir.join("b.planet");
+    let out = planet()
+        .args([
+            "generate",
+            "--samples",
+            "4000",
+            "--plates",
+            "8",
+            "--my",
+            "30",
+            "--quiet",
+            "--out",
+        ])
+        .arg(dir.join("out"))
+        .arg("--save")
+        .arg(&save)
+        .output()
+        .expect("run planet generate");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = planet()
+        .args(["bench", "--steps", "3", "--resamplings", "0", "--from"])
+        .arg(&save)
+        .output()
+        .expect("run planet bench");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "bench --from failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("planet bench: 4000 samples"), "{stdout}");
+    let loaded = stdout
+        .lines()
+        .find(|l| l.starts_with("loading the save"))
+        .unwrap_or_else(|| panic!("no loading line in:\n{stdout}"));
+    assert!(loaded.contains("at 30 My"), "{loaded}");
+    assert!(!stdout.contains("mesh + initial planet"), "{stdout}");
+    let drainage = stdout
+        .lines()
+        .find(|l| l.trim_start().starts_with("drainage "))
+        .and_then(|l| l.split_whitespace().nth(1))
+        .and_then(|v| v.parse::<f64>().ok())
+        .unwrap_or_else(|| panic!("no drainage time in:\n{stdout}"));
+    assert!(drainage > 0.0, "{stdout}");
+    fails_with(
+        &[
+            "bench",
+            "--from",
+            dir.join("missing.planet").to_str().unwrap(),
+        ],
+        &["missing.planet"],
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// `planet bench --table2` prints the paper's Table 2 layout: every row, our four columns beside
 /// the paper's, our total at least the sum of the rows it contains, and a whole-planet time that
 /// grows with the resolution. Run on planets 50 times smaller than the table's (the hidden

@@ -20,6 +20,12 @@ pub(crate) struct BenchArgs {
     /// Steps to time.
     #[arg(long, default_value_t = 60)]
     pub(crate) steps: u64,
+    /// Time the steps of a saved planet (a `.planet` file) instead of a new one: a mature
+    /// planet's relief passes cost more than a young one's. The planet's own parameters are
+    /// used (the options that make a new planet are not); `--threads`, `--backend`, `--enable`
+    /// and `--disable` still apply.
+    #[arg(long, value_name = "SAVE")]
+    pub(crate) from: Option<std::path::PathBuf>,
     /// Extra forced resamplings to time after the steps.
     #[arg(long, default_value_t = 5)]
     pub(crate) resamplings: u64,
@@ -84,15 +90,37 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
     if a.table2 {
         return super::table2::table2(&a);
     }
-    let (params, plugins) = planet_params(&a.planet)?;
-    check_run_length(
-        &format!("--steps {} and --resamplings {}", a.steps, a.resamplings),
-        a.steps.saturating_add(a.resamplings),
-        params.planet.samples as usize,
-        false,
-    )?;
     let t0 = Instant::now();
-    let mut sim = build_sim(&a.planet, params, plugins, None)?;
+    let mut sim = match &a.from {
+        Some(path) => {
+            setup_threads(a.planet.threads)?;
+            let mut sim = save::load_from_file(path)?;
+            apply_switches(
+                &mut sim,
+                &a.planet.switches.enable,
+                &a.planet.switches.disable,
+            )?;
+            sim
+        }
+        None => {
+            let (params, plugins) = planet_params(&a.planet)?;
+            check_run_length(
+                &format!("--steps {} and --resamplings {}", a.steps, a.resamplings),
+                a.steps.saturating_add(a.resamplings),
+                params.planet.samples as usize,
+                false,
+            )?;
+            build_sim(&a.planet, params, plugins, None)?
+        }
+    };
+    if a.from.is_some() {
+        check_run_length(
+            &format!("--steps {} and --resamplings {}", a.steps, a.resamplings),
+            a.steps.saturating_add(a.resamplings),
+            sim.mesh().len(),
+            false,
+        )?;
+    }
     use_backend(&mut sim, a.planet.backend)?;
     let build = t0.elapsed();
     let n = sim.mesh().len();
@@ -105,17 +133,27 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
         backend_name(&sim)
     );
     let ms = |d: Option<Duration>| d.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
-    println!("{:<28} {:>10.1} ms", "mesh", ms(sim.timings().last("mesh")));
-    println!(
-        "{:<28} {:>10.1} ms",
-        "initial planet",
-        ms(sim.timings().last("initial_planet"))
-    );
-    println!(
-        "{:<28} {:>10.1} ms",
-        "mesh + initial planet",
-        build.as_secs_f64() * 1e3
-    );
+    if let Some(path) = &a.from {
+        println!(
+            "{:<28} {:>10.1} ms  ({}, at {} My)",
+            "loading the save",
+            build.as_secs_f64() * 1e3,
+            path.display(),
+            num(sim.clock().time_my)
+        );
+    } else {
+        println!("{:<28} {:>10.1} ms", "mesh", ms(sim.timings().last("mesh")));
+        println!(
+            "{:<28} {:>10.1} ms",
+            "initial planet",
+            ms(sim.timings().last("initial_planet"))
+        );
+        println!(
+            "{:<28} {:>10.1} ms",
+            "mesh + initial planet",
+            build.as_secs_f64() * 1e3
+        );
+    }
     // Each step: wall time, what kind of step it was, and its GPU traffic.
     let mut steps: Vec<BenchStep> = Vec::new();
     let traffic0 = gpu_traffic(&sim);

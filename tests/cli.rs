@@ -14,6 +14,36 @@ fn temp_dir(name: &str) -> PathBuf {
     d
 }
 
+/// Generates a 4,000-sample planet of 8 plates over `my` My with the `extra` options (its maps in
+/// `dir/out`), saves it as `dir/name` and returns that path.
+fn save_small_planet(dir: &std::path::Path, name: &str, my: &str, extra: &[&str]) -> PathBuf {
+    let save = dir.join(name);
+    let out = planet()
+        .args([
+            "generate",
+            "--samples",
+            "4000",
+            "--plates",
+            "8",
+            "--my",
+            my,
+            "--quiet",
+        ])
+        .args(extra)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .arg("--save")
+        .arg(&save)
+        .output()
+        .expect("run planet generate");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    save
+}
+
 /// Runs `planet` with `args`, expects exit code 1 and a message containing every needle.
 fn fails_with(args: &[&str], needles: &[&str]) {
     let out = planet().args(args).output().expect("run planet");
@@ -285,28 +315,11 @@ fn plugins_are_listed_switched_and_configured() {
     );
     // A run with hotspots on, saved, resumes with them (state and parameters from the save).
     std::fs::write(&cfg, "[plugins.hotspots]\nradius_km = 600\ncount = 4\n").unwrap();
-    let save = dir.join("h.planet");
-    let out = planet()
-        .args([
-            "generate",
-            "--samples",
-            "4000",
-            "--plates",
-            "8",
-            "--my",
-            "20",
-            "--quiet",
-        ])
-        .args(["--enable", "hotspots", "--config", cfg_s, "--out"])
-        .arg(dir.join("out"))
-        .arg("--save")
-        .arg(&save)
-        .output()
-        .expect("run planet");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let save = save_small_planet(
+        &dir,
+        "h.planet",
+        "20",
+        &["--enable", "hotspots", "--config", cfg_s],
     );
     let out = planet()
         .args(["resume", "--my", "4", "--quiet", "--disable", "erosion"])
@@ -432,29 +445,7 @@ fn bench_times_steady_and_resampling_steps_apart() {
 fn bench_from_a_save_times_the_saved_planet() {
     let dir = temp_dir("bench-from");
     std::fs::create_dir_all(&dir).unwrap();
-    let save = dir.join("b.planet");
-    let out = planet()
-        .args([
-            "generate",
-            "--samples",
-            "4000",
-            "--plates",
-            "8",
-            "--my",
-            "30",
-            "--quiet",
-            "--out",
-        ])
-        .arg(dir.join("out"))
-        .arg("--save")
-        .arg(&save)
-        .output()
-        .expect("run planet generate");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let save = save_small_planet(&dir, "b.planet", "30", &[]);
     let out = planet()
         .args(["bench", "--steps", "3", "--resamplings", "0", "--from"])
         .arg(&save)

@@ -91,6 +91,14 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
         return super::table2::table2(&a);
     }
     let t0 = Instant::now();
+    let check_length = |samples: usize| {
+        check_run_length(
+            &format!("--steps {} and --resamplings {}", a.steps, a.resamplings),
+            a.steps.saturating_add(a.resamplings),
+            samples,
+            false,
+        )
+    };
     let mut sim = match &a.from {
         Some(path) => {
             setup_threads(a.planet.threads)?;
@@ -100,27 +108,15 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
                 &a.planet.switches.enable,
                 &a.planet.switches.disable,
             )?;
+            check_length(sim.mesh().len())?;
             sim
         }
         None => {
             let (params, plugins) = planet_params(&a.planet)?;
-            check_run_length(
-                &format!("--steps {} and --resamplings {}", a.steps, a.resamplings),
-                a.steps.saturating_add(a.resamplings),
-                params.planet.samples as usize,
-                false,
-            )?;
+            check_length(params.planet.samples as usize)?;
             build_sim(&a.planet, params, plugins, None)?
         }
     };
-    if a.from.is_some() {
-        check_run_length(
-            &format!("--steps {} and --resamplings {}", a.steps, a.resamplings),
-            a.steps.saturating_add(a.resamplings),
-            sim.mesh().len(),
-            false,
-        )?;
-    }
     use_backend(&mut sim, a.planet.backend)?;
     let build = t0.elapsed();
     let n = sim.mesh().len();

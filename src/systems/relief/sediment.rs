@@ -527,15 +527,10 @@ impl SedimentRouter {
             if q <= 0.0 {
                 continue;
             }
-            if ocean[r] {
-                b.to_ocean_km3 += q;
-                let d0 = 0.5 * drainage.receiver_km[from];
-                self.send(r, q, d0, elevation_km);
-            } else {
-                self.flux[r] += q;
-            }
+            self.pass_on(drainage, from, r, q, elevation_km, &mut b);
         }
-        // Lakes that drain to the sea (or to a sample the network does not list).
+        // Lakes that drain to the sea (every land sample is in the stack, so the others are
+        // filled by now).
         for l in 0..self.lakes.len() {
             let to = self.lakes[l].to as usize;
             if self.lakes_into[to] != NO_LAKE {
@@ -1065,8 +1060,8 @@ impl SedimentRouter {
         }
     }
 
-    /// Fills the lakes whose rest goes on to sample `to` with their loads, and sends what they
-    /// cannot hold on: to the sea (as a river mouth) or to `to`'s flux.
+    /// Fills the lakes whose rest goes on to sample `to` with their loads, and passes what they
+    /// cannot hold on to `to` ([`Self::pass_on`]).
     fn fill_lakes_into(
         &mut self,
         to: usize,
@@ -1086,20 +1081,29 @@ impl SedimentRouter {
             let q = lake.q;
             let rest = self.lake_fill(g, drainage, &lake, elevation_km, ff);
             b.lakes_km3 += q - rest;
-            if rest <= 0.0 {
-                continue;
+            if rest > 0.0 {
+                self.pass_on(drainage, lake.from as usize, to, rest, elevation_km, b);
             }
-            if drainage.ocean[to] {
-                b.to_ocean_km3 += rest;
-                let d0 = 0.5 * drainage.receiver_km[lake.from as usize];
-                self.send(to, rest, d0, elevation_km);
-            } else if self.rank[to] == u32::MAX {
-                // Land the network does not route (none on a built network): laid here.
-                self.touch_deposit(to, true);
-                self.dep[to] += rest;
-            } else {
-                self.flux[to] += rest;
-            }
+        }
+    }
+
+    /// Sends `q` km³ on from land sample `from` to `r`: into the sea at a river mouth (its
+    /// distance to the sea counted from half the last reach), or onto `r`'s flux on land.
+    fn pass_on(
+        &mut self,
+        drainage: &Drainage,
+        from: usize,
+        r: usize,
+        q: f64,
+        elevation_km: &[f32],
+        b: &mut SedimentBudget,
+    ) {
+        if drainage.ocean[r] {
+            b.to_ocean_km3 += q;
+            let d0 = 0.5 * drainage.receiver_km[from];
+            self.send(r, q, d0, elevation_km);
+        } else {
+            self.flux[r] += q;
         }
     }
 

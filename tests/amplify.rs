@@ -10,7 +10,7 @@ use common::{fresh_seed, gpu_or_skip};
 use glam::DVec3;
 use tectonic_planets::amplify::exemplar::{Exemplar, synthetic_exemplar};
 use tectonic_planets::amplify::{
-    Amplifier, AmplifyOptions, AmplifyQuery, AmplifyUniform, AmplifyVertex, ExemplarSet,
+    Amplifier, AmplifyOptions, AmplifyQuery, AmplifyUniform, AmplifyVertex, ExemplarSet, NoiseMemo,
     TerrainType, amplify_cpu, amplify_point,
 };
 use tectonic_planets::geometry::{SphereMesh, from_lat_lon_deg};
@@ -593,7 +593,10 @@ fn amplify_cpu_matches_the_point_function_and_keeps_bounds() {
     amplify_cpu(&u, &amp.vertices, &queries, &mut out);
     let (lo, hi) = amp.range_m();
     for (q, &z) in queries.iter().zip(&out) {
-        assert_eq!(z.to_bits(), amplify_point(&u, &amp.vertices, q).to_bits());
+        assert_eq!(
+            z.to_bits(),
+            amplify_point(&u, &amp.vertices, q, &mut NoiseMemo::default()).to_bits()
+        );
         assert!(
             z.is_finite() && z >= lo && z <= hi,
             "{z} outside {lo}..{hi}"

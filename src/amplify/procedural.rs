@@ -149,17 +149,55 @@ fn corner2(seed: u32, ix: i32, iy: i32) -> u32 {
     hash_u32((ix as u32).wrapping_mul(0x8da6_b343) ^ (iy as u32).wrapping_mul(0xd816_3841) ^ seed)
 }
 
+/// The gradient index (`grad2` reads three bits) of each corner of the 2D noise cell whose
+/// lowest corner is (`ix`, `iy`), in the order (0, 0), (1, 0), (0, 1), (1, 1).
+#[inline]
+fn corners2(seed: u32, ix: i32, iy: i32) -> [u8; 4] {
+    let h = |dx: i32, dy: i32| (corner2(seed, ix + dx, iy + dy) & 7) as u8;
+    [h(0, 0), h(1, 0), h(0, 1), h(1, 1)]
+}
+
+/// 2D gradient noise in a cell whose corners have gradients `h` (see [`corners2`]), at
+/// (`tx`, `ty`) within it.
+#[inline]
+fn noise2_in(h: [u8; 4], tx: f32, ty: f32) -> f32 {
+    let n00 = grad2(u32::from(h[0]), tx, ty);
+    let n10 = grad2(u32::from(h[1]), tx - 1.0, ty);
+    let n01 = grad2(u32::from(h[2]), tx, ty - 1.0);
+    let n11 = grad2(u32::from(h[3]), tx - 1.0, ty - 1.0);
+    let (u, v) = (fade(tx), fade(ty));
+    mix(mix(n00, n10, u), mix(n01, n11, u), v)
+}
+
 /// 2D gradient noise, roughly in [-0.75, 0.75], zero at lattice points.
 pub fn noise2(seed: u32, x: f32, y: f32) -> f32 {
     let (fx, ix) = floor_i(x);
     let (fy, iy) = floor_i(y);
-    let (tx, ty) = (x - fx, y - fy);
-    let n00 = grad2(corner2(seed, ix, iy), tx, ty);
-    let n10 = grad2(corner2(seed, ix + 1, iy), tx - 1.0, ty);
-    let n01 = grad2(corner2(seed, ix, iy + 1), tx, ty - 1.0);
-    let n11 = grad2(corner2(seed, ix + 1, iy + 1), tx - 1.0, ty - 1.0);
-    let (u, v) = (fade(tx), fade(ty));
-    mix(mix(n00, n10, u), mix(n01, n11, u), v)
+    noise2_in(corners2(seed, ix, iy), x - fx, y - fy)
+}
+
+/// The last cell one caller of [`noise2`] evaluated, with its corners' gradients: a run of
+/// nearby points (the pixels of a row are tens to hundreds to a noise cell) skips the four
+/// corner hashes while it stays in the cell. The same bits as [`noise2`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Cell2 {
+    key: Option<(u32, i32, i32)>,
+    h: [u8; 4],
+}
+
+impl Cell2 {
+    /// [`noise2`]`(seed, x, y)`, the corners' hashes reused when the cell is the last one's.
+    #[inline]
+    pub fn noise2(&mut self, seed: u32, x: f32, y: f32) -> f32 {
+        let (fx, ix) = floor_i(x);
+        let (fy, iy) = floor_i(y);
+        let key = Some((seed, ix, iy));
+        if self.key != key {
+            self.h = corners2(seed, ix, iy);
+            self.key = key;
+        }
+        noise2_in(self.h, x - fx, y - fy)
+    }
 }
 
 #[inline]
@@ -198,32 +236,103 @@ fn grad3(h: u32, x: f32, y: f32, z: f32) -> f32 {
     a * x + b * y + c * z
 }
 
+/// The gradient index (`grad3` reads four bits) of each corner of the 3D noise cell whose
+/// lowest corner is (`ix`, `iy`, `iz`), x fastest: (0, 0, 0), (1, 0, 0), (0, 1, 0), ... (1, 1, 1).
+#[inline]
+fn corners3(seed: u32, ix: i32, iy: i32, iz: i32) -> [u8; 8] {
+    let h = |dx: i32, dy: i32, dz: i32| (corner3(seed, ix + dx, iy + dy, iz + dz) & 15) as u8;
+    [
+        h(0, 0, 0),
+        h(1, 0, 0),
+        h(0, 1, 0),
+        h(1, 1, 0),
+        h(0, 0, 1),
+        h(1, 0, 1),
+        h(0, 1, 1),
+        h(1, 1, 1),
+    ]
+}
+
+/// 3D gradient noise in a cell whose corners have gradients `h` (see [`corners3`]), at
+/// (`tx`, `ty`, `tz`) within it.
+#[inline]
+fn noise3_in(h: [u8; 8], tx: f32, ty: f32, tz: f32) -> f32 {
+    let g = |k: usize, dx: f32, dy: f32, dz: f32| grad3(u32::from(h[k]), tx - dx, ty - dy, tz - dz);
+    let (u, v, w) = (fade(tx), fade(ty), fade(tz));
+    let x00 = mix(g(0, 0.0, 0.0, 0.0), g(1, 1.0, 0.0, 0.0), u);
+    let x10 = mix(g(2, 0.0, 1.0, 0.0), g(3, 1.0, 1.0, 0.0), u);
+    let x01 = mix(g(4, 0.0, 0.0, 1.0), g(5, 1.0, 0.0, 1.0), u);
+    let x11 = mix(g(6, 0.0, 1.0, 1.0), g(7, 1.0, 1.0, 1.0), u);
+    mix(mix(x00, x10, v), mix(x01, x11, v), w)
+}
+
 /// 3D gradient noise, roughly in [-1, 1].
 pub fn noise3(seed: u32, x: f32, y: f32, z: f32) -> f32 {
     let (fx, ix) = floor_i(x);
     let (fy, iy) = floor_i(y);
     let (fz, iz) = floor_i(z);
-    let (tx, ty, tz) = (x - fx, y - fy, z - fz);
-    let g = |dx: i32, dy: i32, dz: i32| {
-        grad3(
-            corner3(seed, ix + dx, iy + dy, iz + dz),
-            tx - dx as f32,
-            ty - dy as f32,
-            tz - dz as f32,
-        )
-    };
-    let (u, v, w) = (fade(tx), fade(ty), fade(tz));
-    let x00 = mix(g(0, 0, 0), g(1, 0, 0), u);
-    let x10 = mix(g(0, 1, 0), g(1, 1, 0), u);
-    let x01 = mix(g(0, 0, 1), g(1, 0, 1), u);
-    let x11 = mix(g(0, 1, 1), g(1, 1, 1), u);
-    mix(mix(x00, x10, v), mix(x01, x11, v), w)
+    noise3_in(corners3(seed, ix, iy, iz), x - fx, y - fy, z - fz)
+}
+
+/// The last cell of `N` 3D noises of seeds `seed`, `seed + 1`, ... at the same point (one for
+/// the detail layer, three for the valleys' warp), with their corners' gradients; see
+/// [`Cell2`]. The same bits as [`noise3`].
+#[derive(Clone, Copy, Debug)]
+pub struct Cell3<const N: usize> {
+    key: Option<(u32, i32, i32, i32)>,
+    h: [[u8; 8]; N],
+}
+
+impl<const N: usize> Default for Cell3<N> {
+    fn default() -> Self {
+        Self {
+            key: None,
+            h: [[0; 8]; N],
+        }
+    }
+}
+
+impl<const N: usize> Cell3<N> {
+    /// [`noise3`]`(seed + k, x, y, z)` for k = 0 .. N, the corners' hashes reused when the
+    /// cell is the last one's.
+    #[inline]
+    pub fn noise3(&mut self, seed: u32, x: f32, y: f32, z: f32) -> [f32; N] {
+        let (fx, ix) = floor_i(x);
+        let (fy, iy) = floor_i(y);
+        let (fz, iz) = floor_i(z);
+        let key = Some((seed, ix, iy, iz));
+        if self.key != key {
+            for (k, h) in self.h.iter_mut().enumerate() {
+                *h = corners3(seed.wrapping_add(k as u32), ix, iy, iz);
+            }
+            self.key = key;
+        }
+        let (tx, ty, tz) = (x - fx, y - fy, z - fz);
+        self.h.map(|h| noise3_in(h, tx, ty, tz))
+    }
+}
+
+/// What one thread's run of nearby points keeps of the noise cells it evaluated (see
+/// [`Cell2`]): per corner of the query's triangle, one cell per octave of its primitive, and
+/// one per octave of the detail layer. Values are the same bits with or without it.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoiseMemo {
+    corners: [[Cell2; 4]; 3],
+    detail: [Cell3<1>; 2],
 }
 
 /// Fractal sum of `noise2` (lacunarity 2), normalised by the sum of the octave weights.
 /// Only the first `kept` octaves are summed (the others count in the normalisation: left out,
 /// their zero-mean detail is filtered away, see [`kept_octaves`]).
-fn fbm2(seed: u32, x: f32, y: f32, octaves: u32, kept: u32, gain: f32) -> f32 {
+/// `memo` keeps a cell per octave (see [`Cell2`]).
+fn fbm2(
+    memo: &mut [Cell2; 4],
+    seed: u32,
+    (x, y): (f32, f32),
+    octaves: u32,
+    kept: u32,
+    gain: f32,
+) -> f32 {
     let mut sum = 0.0;
     let mut norm = 0.0;
     let mut amp = 1.0;
@@ -232,7 +341,7 @@ fn fbm2(seed: u32, x: f32, y: f32, octaves: u32, kept: u32, gain: f32) -> f32 {
     while o < octaves {
         if o < kept {
             sum += amp
-                * noise2(
+                * memo[o as usize % 4].noise2(
                     seed.wrapping_add(o.wrapping_mul(0x9e37_79b9)),
                     x * freq,
                     y * freq,
@@ -259,8 +368,14 @@ fn kept_octaves(u: &AmplifyUniform, wl_km: f32, octaves: u32) -> u32 {
 }
 
 /// The relief of one vertex's primitive at unit direction `p` (metres), and the amplitude of
-/// the detail layer it asks for (metres).
-fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f32) {
+/// the detail layer it asks for (metres). `memo` keeps a noise cell per octave (the same bits
+/// whatever it holds).
+fn vertex_relief(
+    u: &AmplifyUniform,
+    v: &AmplifyVertex,
+    p: [f32; 3],
+    memo: &mut [Cell2; 4],
+) -> (f32, f32) {
     let r = u.radius_km;
     let d = [(p[0] - v.px) * r, (p[1] - v.py) * r, (p[2] - v.pz) * r];
     let a = [v.ax, v.ay, v.az];
@@ -303,9 +418,12 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
         // Abyssal hills run parallel to the ridge (long along x); each ridge segment between
         // two faults is offset across the ridge (along y), as transform faults offset them.
         let hills = fbm2(
+            memo,
             seed,
-            ridge_axis / (OCEAN_HILL_WAVELENGTH_KM * OCEAN_HILL_STRETCH),
-            (spreading_dir + shift) / OCEAN_HILL_WAVELENGTH_KM,
+            (
+                ridge_axis / (OCEAN_HILL_WAVELENGTH_KM * OCEAN_HILL_STRETCH),
+                (spreading_dir + shift) / OCEAN_HILL_WAVELENGTH_KM,
+            ),
             3,
             kept_octaves(u, OCEAN_HILL_WAVELENGTH_KM, 3),
             0.5,
@@ -317,9 +435,9 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
         (relief, share * OCEAN_DETAIL_M)
     } else if v.kind == KIND_PLAIN {
         let n = fbm2(
+            memo,
             seed ^ 0x1b87_3593,
-            x / PLAIN_WAVELENGTH_KM,
-            y / PLAIN_WAVELENGTH_KM,
+            (x / PLAIN_WAVELENGTH_KM, y / PLAIN_WAVELENGTH_KM),
             4,
             kept_octaves(u, PLAIN_WAVELENGTH_KM, 4),
             0.5,
@@ -354,7 +472,7 @@ fn vertex_relief(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f3
         let kept = kept_octaves(u, wl, 4);
         while o < 4 {
             if o < kept {
-                let n = noise2(
+                let n = memo[o as usize % 4].noise2(
                     mseed.wrapping_add(o.wrapping_mul(0x9e37_79b9)),
                     gx * freq,
                     gy * freq,
@@ -409,19 +527,19 @@ fn plain_share(elevation_m: f32) -> f32 {
 }
 
 /// The isotropic detail layer at unit direction `p`, in about [-1, 1] (two octaves of 3D
-/// gradient noise, 0.8 km and 0.32 km).
-fn detail(u: &AmplifyUniform, p: [f32; 3]) -> f32 {
+/// gradient noise, 0.8 km and 0.32 km); `memo` keeps a cell per octave.
+fn detail(u: &AmplifyUniform, p: [f32; 3], memo: &mut [Cell3<1>; 2]) -> f32 {
     let f = u.radius_km / DETAIL_WAVELENGTH_KM;
     let s = u.seed ^ 0xe654_6b64;
     let (x, y, z) = (p[0] * f, p[1] * f, p[2] * f);
     // Each octave only where the output resolves it.
     let n0 = if DETAIL_WAVELENGTH_KM >= u.min_wavelength_km {
-        noise3(s, x, y, z)
+        memo[0].noise3(s, x, y, z)[0]
     } else {
         0.0
     };
     let n1 = if DETAIL_WAVELENGTH_KM / 2.5 >= u.min_wavelength_km {
-        noise3(s.wrapping_add(1), 2.5 * x, 2.5 * y, 2.5 * z)
+        memo[1].noise3(s.wrapping_add(1), 2.5 * x, 2.5 * y, 2.5 * z)[0]
     } else {
         0.0
     };
@@ -432,12 +550,15 @@ fn detail(u: &AmplifyUniform, p: [f32; 3]) -> f32 {
 /// The amplified elevation (metres) of one query: the barycentric crust elevation plus the
 /// blended relief of the three corners' primitives and the detail layer, the relief clamped to
 /// ±[`MAX_RELIEF_M`]. Corners with zero weight are skipped. `primitive` gives the relief of a
-/// corner (see [`procedural_primitive`]; the exemplar amplifier passes its own).
+/// corner (see [`procedural_primitive`]; the exemplar amplifier passes its own), with the noise
+/// cells `memo` keeps for that corner; `memo` is the caller's, kept from one query to the next
+/// (nearby queries share noise cells; the value is the same whatever it holds).
 pub fn amplify_point_with(
     u: &AmplifyUniform,
     vertices: &[AmplifyVertex],
     q: &AmplifyQuery,
-    primitive: impl Fn(&AmplifyVertex, [f32; 3]) -> (f32, f32),
+    memo: &mut NoiseMemo,
+    mut primitive: impl FnMut(&AmplifyVertex, [f32; 3], &mut [Cell2; 4]) -> (f32, f32),
 ) -> f32 {
     let p = [q.dx, q.dy, q.dz];
     let corners = [(q.c0, q.w0), (q.c1, q.w1), (q.c2, q.w2)];
@@ -446,7 +567,7 @@ pub fn amplify_point_with(
     let mut detail_amp = 0.0f32;
     let mut w2 = 0.0f32;
     let mut wsum = 0.0f32;
-    for (c, w) in corners {
+    for (k, (c, w)) in corners.into_iter().enumerate() {
         let Some(v) = vertices.get(c as usize) else {
             continue;
         };
@@ -455,7 +576,7 @@ pub fn amplify_point_with(
         // edges, and most points need only one or two primitives).
         let wp = w - BLEND_CUT;
         if wp > 0.0 {
-            let (r, da) = primitive(v, p);
+            let (r, da) = primitive(v, p, &mut memo.corners[k]);
             relief += wp * r;
             detail_amp += wp * da;
             w2 += wp * wp;
@@ -464,18 +585,30 @@ pub fn amplify_point_with(
     }
     let detail_amp = detail_amp / wsum.max(1.0e-12);
     let blended = relief / w2.max(1.0e-12).sqrt();
-    let total = (blended + detail_amp * detail(u, p)) * u.relief_scale;
+    let total = (blended + detail_amp * detail(u, p, &mut memo.detail)) * u.relief_scale;
     base + total.clamp(-MAX_RELIEF_M, MAX_RELIEF_M)
 }
 
-/// The procedural primitive of vertex `v` at unit direction `p`: (relief m, detail amplitude m).
-pub fn procedural_primitive(u: &AmplifyUniform, v: &AmplifyVertex, p: [f32; 3]) -> (f32, f32) {
-    vertex_relief(u, v, p)
+/// The procedural primitive of vertex `v` at unit direction `p`: (relief m, detail amplitude m)
+/// (`memo`: see [`amplify_point_with`]).
+pub fn procedural_primitive(
+    u: &AmplifyUniform,
+    v: &AmplifyVertex,
+    p: [f32; 3],
+    memo: &mut [Cell2; 4],
+) -> (f32, f32) {
+    vertex_relief(u, v, p, memo)
 }
 
-/// The procedural amplified elevation (metres) of one query.
-pub fn amplify_point(u: &AmplifyUniform, vertices: &[AmplifyVertex], q: &AmplifyQuery) -> f32 {
-    amplify_point_with(u, vertices, q, |v, p| vertex_relief(u, v, p))
+/// The procedural amplified elevation (metres) of one query (`memo`: see
+/// [`amplify_point_with`]; `&mut NoiseMemo::default()` for a query on its own).
+pub fn amplify_point(
+    u: &AmplifyUniform,
+    vertices: &[AmplifyVertex],
+    q: &AmplifyQuery,
+    memo: &mut NoiseMemo,
+) -> f32 {
+    amplify_point_with(u, vertices, q, memo, |v, p, m| vertex_relief(u, v, p, m))
 }
 
 /// CPU reference of the `amplify` kernel: the amplified elevation (metres) of every query, in
@@ -490,7 +623,9 @@ pub fn amplify_cpu(
     out.par_iter_mut()
         .zip(queries.par_iter())
         .with_min_len(1024)
-        .for_each(|(o, q)| *o = amplify_point(u, vertices, q));
+        .for_each_init(NoiseMemo::default, |m, (o, q)| {
+            *o = amplify_point(u, vertices, q, m)
+        });
 }
 
 #[cfg(test)]
@@ -539,5 +674,50 @@ mod tests {
             assert!(c.abs() <= 1.5);
         }
         assert!(max > 0.2 && max < 1.0, "noise2 range {max}");
+    }
+
+    #[test]
+    fn noise_memos_give_the_bits_of_the_noises() {
+        // A walk of small steps (most points in the last point's cell) that changes seed now
+        // and then: a memo keyed without the seed, or keeping a cell it left, gives other bits.
+        let (mut c2, mut c3, mut w3) = (
+            Cell2::default(),
+            Cell3::<1>::default(),
+            Cell3::<3>::default(),
+        );
+        let (mut hits2, mut hits3) = (0, 0);
+        let (mut last2, mut last3) = (None, None);
+        for i in 0..20_000u32 {
+            let t = i as f32 * 0.0173;
+            let (x, y, z) = (t - 40.0, 0.37 * t + 2.5 * (0.01 * t).sin(), -0.21 * t);
+            let seed = 11 + (i / 700) % 3;
+            let k2 = (seed, floor_i(x).1, floor_i(y).1);
+            let k3 = (k2, floor_i(z).1);
+            hits2 += usize::from(last2 == Some(k2));
+            hits3 += usize::from(last3 == Some(k3));
+            (last2, last3) = (Some(k2), Some(k3));
+            assert_eq!(
+                c2.noise2(seed, x, y).to_bits(),
+                noise2(seed, x, y).to_bits()
+            );
+            assert_eq!(
+                c3.noise3(seed, x, y, z)[0].to_bits(),
+                noise3(seed, x, y, z).to_bits()
+            );
+            let w = w3.noise3(seed, x, y, z);
+            for (k, v) in w.iter().enumerate() {
+                let want = noise3(seed.wrapping_add(k as u32), x, y, z);
+                assert_eq!(v.to_bits(), want.to_bits(), "warp noise {k} at step {i}");
+            }
+        }
+        // The walk does reuse cells (so the memos are exercised) and leaves them too.
+        assert!(
+            hits2 > 15_000 && hits2 < 19_990,
+            "2D cell reused {hits2} times"
+        );
+        assert!(
+            hits3 > 15_000 && hits3 < 19_990,
+            "3D cell reused {hits3} times"
+        );
     }
 }

@@ -40,7 +40,7 @@ use crate::random::mix64;
 
 #[cfg(doc)]
 use super::procedural::relief_amplitude_m;
-use super::procedural::{AmplifyQuery, noise3};
+use super::procedural::{AmplifyQuery, Cell3};
 
 /// No bed (ocean samples, samples without a reach).
 const NO_BED: f32 = f32::NAN;
@@ -288,7 +288,8 @@ impl Valleys {
     /// `p` moved within the tangent plane by a smooth random field (at most about 0.4 of the
     /// first tributaries' spacing, see [`WARP_MAX`]), so that valleys wind instead of running
     /// straight; small enough against its wavelength that the warp folds nothing over.
-    fn warp(&self, p: DVec3) -> DVec3 {
+    /// `memo` keeps the warp's noise cell from one point to the next (the same bits).
+    fn warp(&self, p: DVec3, memo: &mut Cell3<3>) -> DVec3 {
         let Some(first) = self.levels.first() else {
             return p;
         };
@@ -296,11 +297,9 @@ impl Valleys {
         let f = (self.radius_km / wl) as f32;
         let (x, y, z) = (p.x as f32 * f, p.y as f32 * f, p.z as f32 * f);
         let s = self.seed ^ 0x7761_7270;
-        let w = DVec3::new(
-            f64::from(noise3(s, x, y, z)),
-            f64::from(noise3(s.wrapping_add(1), x, y, z)),
-            f64::from(noise3(s.wrapping_add(2), x, y, z)),
-        );
+        // Noises of seeds s, s + 1 and s + 2 at the same point.
+        let [wx, wy, wz] = memo.noise3(s, x, y, z);
+        let w = DVec3::new(f64::from(wx), f64::from(wy), f64::from(wz));
         let w = w - p * p.dot(w);
         (p + w * (WARP_SHARE * first.spacing_km / self.radius_km)).normalize()
     }
@@ -395,7 +394,11 @@ impl Valleys {
             }
             // The warp moves the valleys by less than the tributaries' spacing: without them
             // (an output too coarse to show them), it would not show either.
-            let p = if self.detail == 0 { p0 } else { self.warp(p0) };
+            let p = if self.detail == 0 {
+                p0
+            } else {
+                self.warp(p0, &mut plan.warp)
+            };
             let m = (1.0 + MOD_GAIN * relief / amp_here).clamp(MOD_RANGE.0, MOD_RANGE.1);
             plan.points.push(PlanPoint { k, p, cap, m });
         }
@@ -533,6 +536,8 @@ pub struct Plan {
     candidates: Vec<u32>,
     reaches: Vec<PlanReach>,
     nodes: Vec<Node>,
+    /// The warp's last noise cell (see [`Cell3`]).
+    warp: Cell3<3>,
 }
 
 /// A point to carve: its index in the call, its (warped) position, cap and wall factor.

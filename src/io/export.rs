@@ -13,7 +13,7 @@ use glam::DVec3;
 use image::RgbImage;
 use rayon::prelude::*;
 
-use crate::amplify::{Amplifier, AmplifyQuery};
+use crate::amplify::{Amplifier, AmplifyQuery, NoiseMemo};
 use crate::geometry::SphereMesh;
 use crate::gpu::GpuContext;
 use crate::gpu::amplify::AmplifyGpu;
@@ -524,11 +524,12 @@ fn amplify_band_cpu(
     let locate = |d: DVec3, hint: &mut u32| amp.query_hinted(d, hint);
     grid.band_hinted(row0, rows, &locate, queries);
     band.clear();
+    // One noise memo per run of nearby pixels (a row's neighbours share noise cells).
     band.par_extend(
         queries
             .par_iter()
             .with_min_len(1024)
-            .map(|q| amp.primitives_of(q)),
+            .map_init(NoiseMemo::default, |m, q| amp.primitives_of_memo(q, m)),
     );
     amp.carve_band(queries, band, grid.width as usize, valley_block(grid, amp));
 }

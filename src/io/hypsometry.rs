@@ -269,39 +269,92 @@ pub fn hypsometry(mesh: &SphereMesh, crust: &Crust) -> Hypsometry {
     }
 }
 
-/// Draws `hypsometry.png`: the cumulative area (x, 0 to 100%, from the highest ground) against
-/// elevation (y, −11 to +9 km), ours in red over Earth's in black, with sea level and the
-/// 1 km lines; `width` × `width`·0.6 pixels.
+/// Draws `hypsometry.png`: the cumulative area (x, 0 to 100% of the globe, from the highest
+/// ground) against elevation (y, −11 to +9 km), ours in red over Earth's in black, with sea
+/// level, the 1 km lines, the axes' figures, a legend and the W1 gap; `width` × `width`·0.6
+/// pixels.
 pub fn write_hypsometry_png(h: &Hypsometry, path: &Path, width: u32) -> Result<(), MapError> {
+    hypsometry_image(h, width)
+        .save(path)
+        .map_err(|source| MapError::Image {
+            path: path.to_path_buf(),
+            source,
+        })
+}
+
+/// The chart [`write_hypsometry_png`] writes.
+pub fn hypsometry_image(h: &Hypsometry, width: u32) -> RgbImage {
+    use crate::io::text::{GLYPH_H, draw_text, text_width};
+    const INK: [u8; 3] = [20, 20, 20];
+    const OURS: [u8; 3] = [210, 40, 30];
+    const GRID: [u8; 3] = [225, 225, 225];
+    const SEA: [u8; 3] = [60, 110, 200];
+    const LABEL: [u8; 3] = [90, 90, 90];
     let e = earth();
     let w = width.clamp(200, 4000);
     let ht = (w as f64 * 0.6) as u32;
     let mut img = RgbImage::from_pixel(w, ht, Rgb([255, 255, 255]));
+    // Text at 2× from 600 pixels wide; margins for the figures, the legend and the x axis.
+    let sc = if w >= 600 { 2 } else { 1 };
+    let line = i64::from((GLYPH_H + 4) * sc);
+    let (left, right) = (i64::from(text_width("-10", sc) + 6 * sc), 6 * i64::from(sc));
+    let (top, bottom) = (line + 4, 2 * line + 4);
+    let (x_lo, x_hi) = (left, i64::from(w) - 1 - right);
+    let (y_lo, y_hi) = (top, i64::from(ht) - 1 - bottom);
     let (zmin, zmax) = (-11000.0, 9000.0);
-    let y_of = |z: f64| ((zmax - z) / (zmax - zmin) * (ht - 1) as f64).round() as i64;
-    let x_of = |f: f64| (f * (w - 1) as f64).round() as i64;
+    let y_of = |z: f64| y_lo + ((zmax - z) / (zmax - zmin) * (y_hi - y_lo) as f64).round() as i64;
+    let x_of = |f: f64| x_lo + (f * (x_hi - x_lo) as f64).round() as i64;
     let put = |img: &mut RgbImage, x: i64, y: i64, c: [u8; 3]| {
         if x >= 0 && y >= 0 && (x as u32) < w && (y as u32) < ht {
             img.put_pixel(x as u32, y as u32, Rgb(c));
         }
     };
+    let glyph_h = i64::from(GLYPH_H * sc);
     for km in -11..=9 {
         let y = y_of(km as f64 * 1000.0);
-        let c = if km == 0 {
-            [60, 110, 200]
-        } else {
-            [225, 225, 225]
-        };
-        for x in 0..w as i64 {
+        let c = if km == 0 { SEA } else { GRID };
+        for x in x_lo..=x_hi {
             put(&mut img, x, y, c);
+        }
+        if km % 2 == 0 {
+            let t = km.to_string();
+            let tx = left - 3 * i64::from(sc) - i64::from(text_width(&t, sc));
+            draw_text(&mut img, tx, y - glyph_h / 2, &t, sc, LABEL);
         }
     }
     for tenth in 0..=10 {
         let x = x_of(tenth as f64 / 10.0);
-        for y in 0..ht as i64 {
-            put(&mut img, x, y, [225, 225, 225]);
+        for y in y_lo..=y_hi {
+            put(&mut img, x, y, GRID);
         }
+        let t = format!("{}%", tenth * 10);
+        let tw = i64::from(text_width(&t, sc));
+        let tx = (x - tw / 2).clamp(0, i64::from(w) - 1 - tw);
+        draw_text(&mut img, tx, y_hi + 4, &t, sc, LABEL);
     }
+    let axis = "AREA ABOVE, % OF THE GLOBE";
+    let ax = (x_lo + x_hi - i64::from(text_width(axis, sc))) / 2;
+    draw_text(&mut img, ax, y_hi + 4 + line, axis, sc, LABEL);
+    draw_text(&mut img, 2, 2, "KM", sc, LABEL);
+    // Legend: a stroke of each colour before its name, and the gap between the curves.
+    let mut lx = x_lo + 8 * i64::from(sc);
+    let ly = 2;
+    for (name, c) in [("EARTH (ETOPO1)", INK), ("THIS PLANET", OURS)] {
+        for x in lx..lx + 14 * i64::from(sc) {
+            for dy in -1..=1 {
+                put(&mut img, x, ly + glyph_h / 2 + dy, c);
+            }
+        }
+        lx += 18 * i64::from(sc);
+        draw_text(&mut img, lx, ly, name, sc, c);
+        lx += i64::from(text_width(name, sc)) + 12 * i64::from(sc);
+    }
+    let gap = format!(
+        "W1 GAP {:.0} M, LAND {:.1}%",
+        h.w1_gap_m,
+        100.0 * h.land_fraction
+    );
+    draw_text(&mut img, lx, ly, &gap, sc, LABEL);
     // Curves: cumulative area from the top, i.e. level 1 − q at quantile q.
     let draw = |img: &mut RgbImage, qs: &[f64], c: [u8; 3]| {
         let pts: Vec<(i64, i64)> = e
@@ -322,12 +375,9 @@ pub fn write_hypsometry_png(h: &Hypsometry, path: &Path, width: u32) -> Result<(
             }
         }
     };
-    draw(&mut img, &e.quantiles_m, [20, 20, 20]);
-    draw(&mut img, &h.quantiles_m, [210, 40, 30]);
-    img.save(path).map_err(|source| MapError::Image {
-        path: path.to_path_buf(),
-        source,
-    })
+    draw(&mut img, &e.quantiles_m, INK);
+    draw(&mut img, &h.quantiles_m, OURS);
+    img
 }
 
 #[cfg(test)]
@@ -343,6 +393,26 @@ mod tests {
             crust.age_my[i] = ((i * 37) % 100) as f32;
         }
         (mesh, crust)
+    }
+
+    #[test]
+    fn the_chart_has_its_figures_legend_and_curves() {
+        let (mesh, crust) = ocean();
+        let img = hypsometry_image(&hypsometry(&mesh, &crust), 900);
+        assert_eq!((img.width(), img.height()), (900, 540));
+        let is = |x: u32, y: u32, c: [u8; 3]| img.get_pixel(x, y).0 == c;
+        // Runs of rows with grey ink left of the plot: "KM", the figures -10, -8, ... 8 and
+        // the area axis' "0%".
+        let inked: Vec<bool> = (0..img.height())
+            .map(|y| (0..40).any(|x| is(x, y, [90, 90, 90])))
+            .collect();
+        let runs = inked.windows(2).filter(|p| p[1] && !p[0]).count() + usize::from(inked[0]);
+        assert_eq!(runs, 12, "figures on the elevation axis");
+        // The legend names our curve in its colour, and the curve is drawn.
+        let red_top = (0..img.width()).filter(|&x| (0..20).any(|y| is(x, y, [210, 40, 30])));
+        assert!(red_top.count() > 100, "legend");
+        let red = img.pixels().filter(|p| p.0 == [210, 40, 30]).count();
+        assert!(red > 2000, "our curve: {red} pixels");
     }
 
     #[test]

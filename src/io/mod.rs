@@ -13,3 +13,4 @@ pub mod rivers;
 pub mod save;
 pub mod start;
 pub mod summary;
+pub mod text;

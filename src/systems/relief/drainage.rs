@@ -1092,14 +1092,16 @@ pub fn sea_mask_with(
             }
         }
     }
-    // 2. Label every sample with its body (full compression) and sum the bodies in index
-    //    order; a body's smallest sample comes first.
+    // 2. Label every sample with its body and sum the bodies in index order; a body's
+    //    smallest sample comes first. Links only ever point to smaller samples, so the sample
+    //    `i` points to was labelled before it: its label is `i`'s root, one read away.
     let mut negative = false;
     for i in 0..n {
         if !below(i) {
             continue;
         }
-        let r = find(parent, i as u32) as usize;
+        let p = parent[i] as usize;
+        let r = if p == i { i } else { parent[p] as usize };
         parent[i] = r as u32;
         if r == i {
             s.area[r] = 0.0;

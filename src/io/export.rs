@@ -506,8 +506,8 @@ fn valley_block(grid: &GeoGrid, amp: &Amplifier) -> usize {
 }
 
 /// The amplified elevation of rows `row0..row0 + rows` of `grid` on the CPU, into `band`
-/// (`queries`: scratch): pixel by pixel without valleys; with them, the primitives pixel by
-/// pixel and then the valleys block by block (the same bits as pixel by pixel, faster).
+/// (`queries`: scratch): the primitives pixel by pixel, then the valleys (if any) block by
+/// block (the same bits as pixel by pixel, faster).
 fn amplify_band_cpu(
     amp: &Amplifier,
     grid: &GeoGrid,
@@ -516,11 +516,6 @@ fn amplify_band_cpu(
     queries: &mut Vec<AmplifyQuery>,
     band: &mut Vec<f32>,
 ) {
-    if amp.valleys.is_none() {
-        let f = |d: DVec3, hint: &mut u32| amp.elevation_m_hinted(d, hint);
-        grid.band_hinted(row0, rows, &f, band);
-        return;
-    }
     let locate = |d: DVec3, hint: &mut u32| amp.query_hinted(d, hint);
     grid.band_hinted(row0, rows, &locate, queries);
     band.clear();

@@ -259,6 +259,13 @@ impl ReliefState {
     pub fn deflection_km(&self) -> &[f32] {
         self.iso.deflection_km()
     }
+
+    /// What the last sediment routing was given besides the network and the flux: the surface
+    /// rise per unit of deposit of each sample, and the passages through subducted floor (see
+    /// [`SedimentRouter::passages_mut`]); for timing the router apart on a real step's inputs.
+    pub fn sediment_inputs(&self) -> (&[f32], &[u32]) {
+        (&self.fill, self.router.passages())
+    }
 }
 
 /// Builds the sample graph of `mesh` into `slot` unless it is there already (true when it was

@@ -137,6 +137,9 @@ pub struct SedimentRouter {
     /// Full endorheic basins one overflow may pass through before the rest goes to the nearest
     /// sea (`None`: [`MAX_OVERFLOWS`]).
     pub max_overflows: Option<usize>,
+    /// Milliseconds the last [`Self::route`] spent on its setup, the land (rivers and lakes),
+    /// the sea, and the safety net with the write-out.
+    pub timings_ms: [f64; 4],
     flux: Vec<f64>,
     dep: Vec<f64>,
     dist: Vec<f32>,
@@ -320,6 +323,11 @@ impl SedimentRouter {
     /// chain ends. Fill with [`NO_PASSAGE`] where sediment may settle; leave empty (the
     /// default) for none. [`Self::route`] drops passages that start or end on land (it changes
     /// them to [`NO_PASSAGE`]); they are kept between calls.
+    pub fn passages(&self) -> &[u32] {
+        &self.through
+    }
+
+    /// The passages to fill before [`Self::route`] (see [`Self::passages`]).
     pub fn passages_mut(&mut self) -> &mut Vec<u32> {
         &mut self.through
     }
@@ -372,6 +380,16 @@ impl SedimentRouter {
         deposit_km: &mut [f32],
     ) -> SedimentBudget {
         let n = g.len();
+        let clock = std::time::Instant::now();
+        let mut lap = {
+            let mut last = 0.0;
+            move || {
+                let now = clock.elapsed().as_secs_f64() * 1e3;
+                let d = now - last;
+                last = now;
+                d
+            }
+        };
         deposit_km.iter_mut().for_each(|d| *d = 0.0);
         let mut b = SedimentBudget::default();
         if elevation_km.len() < n
@@ -454,6 +472,7 @@ impl SedimentRouter {
             if z.is_finite() { z as f64 } else { 0.0 }
         };
 
+        self.timings_ms[0] = lap();
         // Land: accumulate and route down the network, filling lakes. Land fluxes are zeroed as
         // the samples are visited, so only samples that keep a deposit are listed in `touched`.
         for i in 0..n {
@@ -537,6 +556,7 @@ impl SedimentRouter {
                 self.fill_lakes_into(to, g, drainage, elevation_km, &ff, &mut b);
             }
         }
+        self.timings_ms[1] = lap();
         // Direct marine input (coastal diffusion outflow).
         if let Some(mi) = marine_input_km3 {
             let half = 0.5 * g.mean_spacing_km as f32;
@@ -677,6 +697,7 @@ impl SedimentRouter {
             }
         }
 
+        self.timings_ms[2] = lap();
         // Safety net: no ocean sample may be raised above the shelf surface at the coast
         // (−coast depth). The visit and pond limits above can leave more than that on one
         // sample (a trench or a basin fed by many rivers); the excess spreads to the nearest
@@ -699,6 +720,7 @@ impl SedimentRouter {
             self.state[i] = 0;
             self.visits[i] = 0;
         }
+        self.timings_ms[3] = lap();
         b
     }
 

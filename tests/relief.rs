@@ -889,6 +889,46 @@ fn closed_basin_fills_and_overflows_as_a_lake() {
     }
 }
 
+/// A load just large enough to fill its lake lays on each sample of the floor what a load just
+/// short of it does (the first fills the whole floor at once, the second grows a pond from the
+/// floor's low point). Seen to fail when the whole floor was taken as the samples that leave
+/// the lake by the same last sample: half the lake was filled, the other half left empty.
+#[test]
+fn a_load_that_fills_its_lake_lays_what_a_pond_would() {
+    let (mesh, g) = mesh_graph(50_000);
+    let (h, ocean) = crater_surface(mesh, g);
+    let mut d = Drainage::new();
+    d.compute(g, &h, &ocean, None);
+    let lake: Vec<usize> = (0..g.len()).filter(|&i| d.is_lake(i)).collect();
+    let capacity: f64 = lake
+        .iter()
+        .map(|&i| d.lake_depth_km(i) as f64 * g.area_km2[i])
+        .sum();
+    let max_depth = lake
+        .iter()
+        .map(|&i| d.lake_depth_km(i))
+        .fold(0.0f32, f32::max);
+    let upstream: Vec<usize> = (0..g.len())
+        .filter(|&i| !ocean[i] && !d.is_lake(i) && drains_into_a_lake(&d, &ocean, i))
+        .collect();
+    let (_, over, _) = route_evenly(g, &d, &h, &upstream, 1.001 * capacity);
+    let (_, under, _) = route_evenly(g, &d, &h, &upstream, 0.999 * capacity);
+    for &i in &lake {
+        assert!(
+            (over[i] - under[i]).abs() < 0.01 * max_depth,
+            "lake sample {i}: {} km from a full load, {} km from one just short (depth {} km)",
+            over[i],
+            under[i],
+            d.lake_depth_km(i)
+        );
+    }
+    let kept: f64 = lake.iter().map(|&i| over[i] as f64 * g.area_km2[i]).sum();
+    assert!(
+        (kept - capacity).abs() / capacity < 1e-3,
+        "the full load left {kept} km³ in a lake of {capacity} km³"
+    );
+}
+
 /// Sediment that a river brings into a lake settles on the lake's floor, lowest first, as one
 /// level pond: nothing rises above the water, the crater's deepest sample takes its share, and
 /// the filled floor is flat. Seen to fail when each lake sample on the river's way to the outlet

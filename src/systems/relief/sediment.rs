@@ -280,7 +280,7 @@ fn in_lake(drainage: &Drainage, k: usize, wl_km: f64) -> bool {
 fn surface_km(
     g: &ReliefGraph,
     elevation_km: &[f32],
-    ff: &dyn Fn(usize) -> f64,
+    ff: &impl Fn(usize) -> f64,
     dep: &[f64],
     j: usize,
 ) -> f64 {
@@ -773,7 +773,7 @@ impl SedimentRouter {
         ocean: &[bool],
         p: &SedimentParams,
         elevation_km: &[f32],
-        ff: &dyn Fn(usize) -> f64,
+        ff: &impl Fn(usize) -> f64,
     ) {
         let cap_level = -p.coast_depth_km;
         // Volume (km³) a sample holds up to −coast depth, and what is left of it.
@@ -916,7 +916,7 @@ impl SedimentRouter {
         mut q: f64,
         p: &SedimentParams,
         elevation_km: &[f32],
-        ff: &dyn Fn(usize) -> f64,
+        ff: &impl Fn(usize) -> f64,
         b: &mut SedimentBudget,
     ) {
         let ocean = &drainage.ocean;
@@ -1053,7 +1053,7 @@ impl SedimentRouter {
         drainage: &Drainage,
         i: usize,
         elevation_km: &[f32],
-        ff: &dyn Fn(usize) -> f64,
+        ff: &impl Fn(usize) -> f64,
     ) -> usize {
         let wl = drainage.water_level_km[i] as f64;
         let cur = |j: usize| surface_km(g, elevation_km, ff, &self.dep, j);
@@ -1111,7 +1111,7 @@ impl SedimentRouter {
         g: &ReliefGraph,
         drainage: &Drainage,
         elevation_km: &[f32],
-        ff: &dyn Fn(usize) -> f64,
+        ff: &impl Fn(usize) -> f64,
         b: &mut SedimentBudget,
     ) {
         let mut l = std::mem::replace(&mut self.lakes_into[to], NO_LAKE);
@@ -1159,7 +1159,7 @@ impl SedimentRouter {
         drainage: &Drainage,
         lake: &PendingLake,
         elevation_km: &[f32],
-        ff: &dyn Fn(usize) -> f64,
+        ff: &impl Fn(usize) -> f64,
     ) -> f64 {
         let low = lake.low as usize;
         let id = drainage
@@ -1267,7 +1267,7 @@ impl SedimentRouter {
         drainage: &Drainage,
         lake: &PendingLake,
         elevation_km: &[f32],
-        ff: &dyn Fn(usize) -> f64,
+        ff: &impl Fn(usize) -> f64,
     ) -> Option<f64> {
         let known = self.lake_room[id];
         if known == 0.0 {
@@ -1316,7 +1316,7 @@ impl SedimentRouter {
         bnd: usize,
         cb: f64,
         in_pond: u32,
-        ff: &dyn Fn(usize) -> f64,
+        ff: &impl Fn(usize) -> f64,
         (q, inv, level): (&mut f64, &mut f64, &mut f64),
     ) -> bool {
         *q -= (*level - cb) * g.area_km2[bnd] / ff(bnd);
@@ -1338,9 +1338,9 @@ impl SedimentRouter {
         &mut self,
         g: &ReliefGraph,
         in_pond: u32,
-        admit: &dyn Fn(usize) -> bool,
+        admit: &impl Fn(usize) -> bool,
         elevation_km: &[f32],
-        ff: &dyn Fn(usize) -> f64,
+        ff: &impl Fn(usize) -> f64,
     ) {
         let in_heap = in_pond + 1;
         let Some(&newest) = self.pond.last() else {
@@ -1380,7 +1380,7 @@ impl SedimentRouter {
         mut q: f64,
         p: &SedimentParams,
         elevation_km: &[f32],
-        ff: &dyn Fn(usize) -> f64,
+        ff: &impl Fn(usize) -> f64,
         land: Option<LandPond>,
     ) -> (Option<usize>, f64) {
         let on_land = land.is_some();
@@ -1489,7 +1489,7 @@ impl SedimentRouter {
         start: usize,
         on_land: bool,
         elevation_km: &[f32],
-        ff: &dyn Fn(usize) -> f64,
+        ff: &impl Fn(usize) -> f64,
     ) {
         let mut shares = std::mem::take(&mut self.shares);
         shares.clear();

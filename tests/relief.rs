@@ -781,6 +781,41 @@ fn drains_into_a_lake(d: &Drainage, ocean: &[bool], i: usize) -> bool {
     false
 }
 
+/// The crater lake of [`crater_surface`] on the 50k mesh, drained: the surface, the sea, the
+/// drainage, the lake's samples, its room (km³) and its greatest depth (km).
+struct CraterLake {
+    h: Vec<f32>,
+    ocean: Vec<bool>,
+    d: Drainage,
+    lake: Vec<usize>,
+    capacity: f64,
+    max_depth: f32,
+}
+
+fn crater_lake() -> CraterLake {
+    let (mesh, g) = mesh_graph(50_000);
+    let (h, ocean) = crater_surface(mesh, g);
+    let mut d = Drainage::new();
+    d.compute(g, &h, &ocean, None);
+    let lake: Vec<usize> = (0..g.len()).filter(|&i| d.is_lake(i)).collect();
+    let capacity = lake
+        .iter()
+        .map(|&i| d.lake_depth_km(i) as f64 * g.area_km2[i])
+        .sum();
+    let max_depth = lake
+        .iter()
+        .map(|&i| d.lake_depth_km(i))
+        .fold(0.0f32, f32::max);
+    CraterLake {
+        h,
+        ocean,
+        d,
+        lake,
+        capacity,
+        max_depth,
+    }
+}
+
 /// Erodes `volume` km³ evenly over `samples` and routes it with the default sediment
 /// parameters: the volume that entered, the deposits (km) and the router's budget.
 fn route_evenly(
@@ -895,19 +930,15 @@ fn closed_basin_fills_and_overflows_as_a_lake() {
 /// the lake by the same last sample: half the lake was filled, the other half left empty.
 #[test]
 fn a_load_that_fills_its_lake_lays_what_a_pond_would() {
-    let (mesh, g) = mesh_graph(50_000);
-    let (h, ocean) = crater_surface(mesh, g);
-    let mut d = Drainage::new();
-    d.compute(g, &h, &ocean, None);
-    let lake: Vec<usize> = (0..g.len()).filter(|&i| d.is_lake(i)).collect();
-    let capacity: f64 = lake
-        .iter()
-        .map(|&i| d.lake_depth_km(i) as f64 * g.area_km2[i])
-        .sum();
-    let max_depth = lake
-        .iter()
-        .map(|&i| d.lake_depth_km(i))
-        .fold(0.0f32, f32::max);
+    let (_, g) = mesh_graph(50_000);
+    let CraterLake {
+        h,
+        ocean,
+        d,
+        lake,
+        capacity,
+        max_depth,
+    } = crater_lake();
     let upstream: Vec<usize> = (0..g.len())
         .filter(|&i| !ocean[i] && !d.is_lake(i) && drains_into_a_lake(&d, &ocean, i))
         .collect();
@@ -937,20 +968,16 @@ fn a_load_that_fills_its_lake_lays_what_a_pond_would() {
 #[test]
 fn sediment_brought_into_a_lake_fills_its_floor_from_the_lowest() {
     let (mesh, g) = mesh_graph(50_000);
-    let (h, ocean) = crater_surface(mesh, g);
-    let mut d = Drainage::new();
-    d.compute(g, &h, &ocean, None);
-    let lake: Vec<usize> = (0..g.len()).filter(|&i| d.is_lake(i)).collect();
-    let capacity: f64 = lake
-        .iter()
-        .map(|&i| d.lake_depth_km(i) as f64 * g.area_km2[i])
-        .sum();
+    let CraterLake {
+        h,
+        ocean,
+        d,
+        lake,
+        capacity,
+        max_depth,
+    } = crater_lake();
     // Rock worn from one quarter of the lake's shallows and of the slopes above them: it enters
     // the lake on one shore.
-    let max_depth = lake
-        .iter()
-        .map(|&i| d.lake_depth_km(i))
-        .fold(0.0f32, f32::max);
     let quarter: Vec<usize> = (0..g.len())
         .filter(|&i| {
             let p = mesh.positions[i];

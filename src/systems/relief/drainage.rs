@@ -278,16 +278,7 @@ impl Drainage {
     /// lakes and the stack (steps 1 to 3). [`Self::compute_areas`] must follow.
     pub fn compute_routes(&mut self, g: &ReliefGraph, elevation_km: &[f32], ocean: &[bool]) {
         let n = g.len();
-        let clock = std::time::Instant::now();
-        let mut lap = {
-            let mut last = 0.0;
-            move || {
-                let now = clock.elapsed().as_secs_f64() * 1e3;
-                let d = now - last;
-                last = now;
-                d
-            }
-        };
+        let mut lap = super::lap_timer();
         self.receiver.resize(n, 0);
         self.receiver_km.resize(n, 0.0);
         self.area_km2.resize(n, 0.0);

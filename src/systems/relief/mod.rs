@@ -268,6 +268,19 @@ impl ReliefState {
     }
 }
 
+/// A lap timer for the passes that time their stages: each call gives the milliseconds since
+/// the last call (the first since the timer was made).
+pub(crate) fn lap_timer() -> impl FnMut() -> f64 {
+    let clock = std::time::Instant::now();
+    let mut last = 0.0;
+    move || {
+        let now = clock.elapsed().as_secs_f64() * 1e3;
+        let d = now - last;
+        last = now;
+        d
+    }
+}
+
 /// Builds the sample graph of `mesh` into `slot` unless it is there already (true when it was
 /// rebuilt).
 fn ensure_graph(slot: &mut Option<Arc<ReliefGraph>>, mesh: &SphereMesh) -> bool {

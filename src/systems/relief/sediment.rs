@@ -391,16 +391,7 @@ impl SedimentRouter {
         deposit_km: &mut [f32],
     ) -> SedimentBudget {
         let n = g.len();
-        let clock = std::time::Instant::now();
-        let mut lap = {
-            let mut last = 0.0;
-            move || {
-                let now = clock.elapsed().as_secs_f64() * 1e3;
-                let d = now - last;
-                last = now;
-                d
-            }
-        };
+        let mut lap = super::lap_timer();
         deposit_km.iter_mut().for_each(|d| *d = 0.0);
         let mut b = SedimentBudget::default();
         if elevation_km.len() < n

@@ -259,6 +259,17 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
             println!("  {label:<26} {m:>10.3} ms");
         }
     }
+    println!("sediment, by phase (median):");
+    for (label, name) in [
+        ("setup", "sediment_setup"),
+        ("land (rivers and lakes)", "sediment_land"),
+        ("sea", "sediment_sea"),
+        ("safety net and write-out", "sediment_safety_net"),
+    ] {
+        if let Some(m) = sim.timings().median_ms(name) {
+            println!("  {label:<26} {m:>10.3} ms");
+        }
+    }
     println!("{:<28} {:>10.3} ms", "all sets but resample", per_step_sum);
     println!(
         "{:<28} {:>10.3} ms",

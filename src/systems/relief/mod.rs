@@ -747,6 +747,7 @@ pub fn deposit_sediment(
     mut flux: ResMut<SurfaceFlux>,
     fronts: (Res<FrontPoints>, Res<ConvergenceField>),
     mut gpu: Option<ResMut<GpuContext>>,
+    mut timings: Option<ResMut<StepTimings>>,
 ) {
     let n = mesh.len();
     if !network.built || network.drainage.receiver.len() != n || flux.eroded_km.len() != n {
@@ -798,6 +799,20 @@ pub fn deposit_sediment(
         &sp,
         &mut flux.deposit_km,
     );
+    if let Some(t) = timings.as_mut() {
+        let ms = state.router.timings_ms;
+        for (name, k) in [
+            ("sediment_setup", 0),
+            ("sediment_land", 1),
+            ("sediment_sea", 2),
+            ("sediment_safety_net", 3),
+        ] {
+            t.record(
+                name,
+                std::time::Duration::from_secs_f64(ms[k].max(0.0) * 1e-3),
+            );
+        }
+    }
     crust
         .thickness_km
         .par_iter_mut()

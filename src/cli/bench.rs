@@ -244,30 +244,36 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
             "climate's search"
         );
     }
-    println!("drainage, by pass (median):");
-    for (label, name) in [
-        ("sea mask", "drainage_sea_mask"),
-        ("receivers", "drainage_receivers"),
-        ("pit basins", "drainage_pit_basins"),
-        ("priority flood", "drainage_flood"),
-        ("stack", "drainage_stack"),
-        ("waiting for the climate", "drainage_climate_wait"),
-        ("areas", "drainage_areas"),
-        ("lakes' water balance", "drainage_lake_balance"),
-    ] {
-        if let Some(m) = sim.timings().median_ms(name) {
-            println!("  {label:<26} {m:>10.3} ms");
-        }
-    }
-    println!("sediment, by phase (median):");
-    for (label, name) in [
-        ("setup", "sediment_setup"),
-        ("land (rivers and lakes)", "sediment_land"),
-        ("sea", "sediment_sea"),
-        ("safety net and write-out", "sediment_safety_net"),
-    ] {
-        if let Some(m) = sim.timings().median_ms(name) {
-            println!("  {label:<26} {m:>10.3} ms");
+    let by_stage: [(&str, &[(&str, &str)]); 2] = [
+        (
+            "drainage, by pass (median):",
+            &[
+                ("sea mask", "drainage_sea_mask"),
+                ("receivers", "drainage_receivers"),
+                ("pit basins", "drainage_pit_basins"),
+                ("priority flood", "drainage_flood"),
+                ("stack", "drainage_stack"),
+                ("waiting for the climate", "drainage_climate_wait"),
+                ("areas", "drainage_areas"),
+                ("lakes' water balance", "drainage_lake_balance"),
+            ],
+        ),
+        (
+            "sediment, by phase (median):",
+            &[
+                ("setup", "sediment_setup"),
+                ("land (rivers and lakes)", "sediment_land"),
+                ("sea", "sediment_sea"),
+                ("safety net and write-out", "sediment_safety_net"),
+            ],
+        ),
+    ];
+    for (title, stages) in by_stage {
+        println!("{title}");
+        for (label, name) in stages {
+            if let Some(m) = sim.timings().median_ms(name) {
+                println!("  {label:<26} {m:>10.3} ms");
+            }
         }
     }
     println!("{:<28} {:>10.3} ms", "all sets but resample", per_step_sum);

@@ -26,6 +26,14 @@ impl StepTimings {
         }
         v.push(d);
     }
+    /// Records the stages a pass timed itself, `(name, milliseconds)` each (negative or NaN
+    /// read as 0).
+    pub fn record_ms(&mut self, stages: &[(&'static str, f64)]) {
+        for &(name, ms) in stages {
+            let ms = if ms > 0.0 { ms } else { 0.0 };
+            self.record(name, Duration::from_secs_f64(ms * 1e-3));
+        }
+    }
     /// The most recent duration recorded under `name`.
     pub fn last(&self, name: &str) -> Option<Duration> {
         self.per_set.get(name).and_then(|v| v.last().copied())

@@ -574,19 +574,14 @@ pub fn build_drainage(
             t.record("climate_search", search);
         }
         let ms = network.drainage.timings_ms;
-        for (name, k) in [
-            ("drainage_receivers", 0),
-            ("drainage_pit_basins", 1),
-            ("drainage_flood", 2),
-            ("drainage_stack", 3),
-            ("drainage_areas", 4),
-            ("drainage_lake_balance", 5),
-        ] {
-            t.record(
-                name,
-                std::time::Duration::from_secs_f64(ms[k].max(0.0) * 1e-3),
-            );
-        }
+        t.record_ms(&[
+            ("drainage_receivers", ms[0]),
+            ("drainage_pit_basins", ms[1]),
+            ("drainage_flood", ms[2]),
+            ("drainage_stack", ms[3]),
+            ("drainage_areas", ms[4]),
+            ("drainage_lake_balance", ms[5]),
+        ]);
     }
 }
 
@@ -801,17 +796,12 @@ pub fn deposit_sediment(
     );
     if let Some(t) = timings.as_mut() {
         let ms = state.router.timings_ms;
-        for (name, k) in [
-            ("sediment_setup", 0),
-            ("sediment_land", 1),
-            ("sediment_sea", 2),
-            ("sediment_safety_net", 3),
-        ] {
-            t.record(
-                name,
-                std::time::Duration::from_secs_f64(ms[k].max(0.0) * 1e-3),
-            );
-        }
+        t.record_ms(&[
+            ("sediment_setup", ms[0]),
+            ("sediment_land", ms[1]),
+            ("sediment_sea", ms[2]),
+            ("sediment_safety_net", ms[3]),
+        ]);
     }
     crust
         .thickness_km

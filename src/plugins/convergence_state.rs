@@ -9,13 +9,15 @@ use crate::resources::{SaveSection, SectionError, SectionReader, SectionWriter};
 
 /// The convergent-boundary state (section `convergence.state`): subduction front points with
 /// their per-step state, the per-sample distance fields, the override pairs, the terranes and
-/// the collision count, the sutures waiting for the next resampling (version 2), plus the front
-/// and terrane entities. Saves made before this section existed load with empty fronts and
-/// terranes, rebuilt at the next resampling; version 1 saves load with no suture waiting.
+/// the collision count, the sutures waiting for the next resampling (version 2), which front
+/// points have a trench without being active (version 3), plus the front and terrane entities.
+/// Saves made before this section existed load with empty fronts and terranes, rebuilt at the
+/// next resampling; version 1 saves load with no suture waiting; saves before version 3 load
+/// with a trench at the active points only until the next step tracks the fronts again.
 pub fn convergence_section() -> SaveSection {
     SaveSection {
         name: "convergence.state",
-        version: 2,
+        version: 3,
         save: save_convergence,
         load: load_convergence,
         default: Some(|_| Ok(())),
@@ -49,7 +51,9 @@ fn save_convergence(world: &mut World, w: &mut SectionWriter) -> Result<(), Sect
         for v in fp.relative_velocity[k].to_array() {
             w.f64(v);
         }
-        w.u8(fp.active[k] as u8);
+        // Bit 0: active; bit 1 (version 3): a trench without being active.
+        let trench_only = fp.trench[k] && !fp.active[k];
+        w.u8(fp.active[k] as u8 | (trench_only as u8) << 1);
     }
     w.u32s(&f32s_as_bits(&fp.length_km));
     w.u32s(&f32s_as_bits(&fp.subducting_elevation_km));
@@ -147,7 +151,8 @@ fn load_convergence(world: &mut World, r: &mut SectionReader, v: u32) -> Result<
     if r.remaining() < m.saturating_mul(57) {
         return Err("front points are truncated".into());
     }
-    let (mut normal, mut rel, mut active) = (
+    let (mut normal, mut rel, mut active, mut trench) = (
+        Vec::with_capacity(m),
         Vec::with_capacity(m),
         Vec::with_capacity(m),
         Vec::with_capacity(m),
@@ -163,11 +168,15 @@ fn load_convergence(world: &mut World, r: &mut SectionReader, v: u32) -> Result<
             r.finite_f64("front velocity")?,
             r.finite_f64("front velocity")?,
         ));
-        active.push(match r.u8()? {
-            0 => false,
-            1 => true,
-            b => return Err(format!("front activity byte {b}").into()),
-        });
+        // Before version 3 a point had a trench exactly when it was active.
+        let (a, t) = match (r.u8()?, v) {
+            (0, _) => (false, false),
+            (1, _) => (true, true),
+            (2, 3..) => (false, true),
+            (b, _) => return Err(format!("front activity byte {b}").into()),
+        };
+        active.push(a);
+        trench.push(t);
     }
     let per_point = |v: Vec<u32>, what: &str| -> Result<Vec<f32>, SectionError> {
         if v.len() != m {
@@ -305,6 +314,7 @@ fn load_convergence(world: &mut World, r: &mut SectionReader, v: u32) -> Result<
         normal,
         length_km,
         active,
+        trench,
         subducting_elevation_km,
         relative_velocity: rel,
         converged_km,

@@ -24,8 +24,13 @@ pub struct FrontPoints {
     pub normal: Vec<DVec3>,
     /// Length of front each point stands for, km.
     pub length_km: Vec<f32>,
-    /// Whether subducting crust is under the point now (dynamic).
+    /// Whether subducting crust is under the point now and the plates converge (dynamic): the
+    /// point lifts the overriding plate and its slab pulls.
     pub active: Vec<bool>,
+    /// Whether subducting crust is under the point or just ahead of it (one mean sample spacing
+    /// towards the subducting plate) and the plates converge (dynamic): the point has a trench
+    /// in front of it. Every active point has one.
+    pub trench: Vec<bool>,
     /// Elevation of the subducting crust at the point now, km (dynamic).
     pub subducting_elevation_km: Vec<f32>,
     /// Subducting minus overriding surface velocity at the point, in the overriding plate's

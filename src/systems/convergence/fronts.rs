@@ -202,6 +202,7 @@ pub fn build_fronts(world: &mut World) {
     }
     let m = fp.len();
     fp.active = vec![false; m];
+    fp.trench = vec![false; m];
     fp.subducting_elevation_km = vec![0.0; m];
     fp.relative_velocity = vec![DVec3::ZERO; m];
     fp.converged_km = vec![0.0; m];
@@ -336,9 +337,12 @@ fn track_fronts_over(dt: f32, t: FrontTracking) {
     let table = PlateTable::from_query(&plates);
     let r_km = params.planet.radius_km;
     let fp = &mut *fp;
+    // How far ahead of a point, towards the subducting plate, a second point looks for the slab
+    // when the triangle under the point has none (for the trench): one mean sample spacing.
+    let probe_rad = mesh.mean_spacing_rad();
     // Where each front point is: the triangle and weights under it in the subducting plate
     // (f64, on the CPU), whether subducting crust is there, the velocities.
-    type Located = (bool, [u32; 3], [f64; 3], DVec3, f32);
+    type Located = ((bool, bool), [u32; 3], [f64; 3], DVec3, f32);
     let located: Vec<Option<Located>> = (0..fp.len())
         .into_par_iter()
         .with_min_len(256)
@@ -351,15 +355,31 @@ fn track_fronts_over(dt: f32, t: FrontTracking) {
             let w = over.world_from_plate * mesh.positions[fp.sample[k] as usize];
             let loc = mesh.locate(sub.plate_from_world * w);
             let t = mesh.triangles[loc.triangle as usize];
-            let active = t.iter().any(|&v| crust.plate[v as usize] == sub.id);
+            let n_world = over.world_from_plate * fp.normal[k];
+            let subducting_under =
+                |t: [u32; 3]| t.iter().any(|&v| crust.plate[v as usize] == sub.id);
+            let under = subducting_under(t);
+            // A front point is a sample of the overriding plate, so right after a resampling it
+            // sits on a vertex and the triangle found under it is a tie among the fan around
+            // it: about a fifth of the points find no subducting vertex although the slab is
+            // one sample away, and their stretch of trench went missing (the trenches came out
+            // as dotted lines). A second point a little ahead, on the subducting side, settles
+            // it for the trench. The uplift and the slab pull keep the point under the front:
+            // the uplift's rate was calibrated with those gaps, and with them filled too the
+            // land rises over long runs (docs/relief.md, "Trenches in dots").
+            let ahead = under || {
+                let p = (w + n_world * probe_rad).normalize();
+                subducting_under(
+                    mesh.triangles[mesh.locate(sub.plate_from_world * p).triangle as usize],
+                )
+            };
             let rel_world =
                 sub.motion.velocity_km_per_my(w, r_km) - over.motion.velocity_km_per_my(w, r_km);
-            let n_world = over.world_from_plate * fp.normal[k];
             let conv = (-rel_world.dot(n_world)) as f32;
             // A front acts only while subducting crust is under it and the plates still converge.
-            let active = active && conv as f64 > params.subduction.min_convergence_mm_per_yr;
+            let converging = conv as f64 > params.subduction.min_convergence_mm_per_yr;
             Some((
-                active,
+                (under && converging, ahead && converging),
                 t,
                 [loc.weights[0], loc.weights[1], loc.weights[2]],
                 over.plate_from_world * rel_world,
@@ -390,11 +410,11 @@ fn track_fronts_over(dt: f32, t: FrontTracking) {
     let gathered = gathered
         .unwrap_or_else(|| crate::gpu::crust_gather::crust_gather_cpu(&crust.elevation_km, &index));
     let mut next = 0;
-    let results: Vec<(bool, f32, DVec3, f32)> = located
+    let results: Vec<((bool, bool), f32, DVec3, f32)> = located
         .into_iter()
         .map(|l| {
             let Some((active, _, weights, rel, conv)) = l else {
-                return (false, 0.0, DVec3::ZERO, 0.0);
+                return ((false, false), 0.0, DVec3::ZERO, 0.0);
             };
             let zv = &gathered[next..next + 3];
             next += 3;
@@ -402,8 +422,9 @@ fn track_fronts_over(dt: f32, t: FrontTracking) {
             (active, z, rel, conv)
         })
         .collect();
-    for (k, (active, z, rel, conv)) in results.into_iter().enumerate() {
+    for (k, ((active, trench), z, rel, conv)) in results.into_iter().enumerate() {
         fp.active[k] = active;
+        fp.trench[k] = trench;
         fp.subducting_elevation_km[k] = z;
         fp.relative_velocity[k] = rel;
         fp.converged_km[k] += conv * dt;

@@ -114,7 +114,7 @@ pub fn subduction_uplift_cpu(
                 && sp != NONE
                 && *ct == CrustType::Oceanic
                 && (*z as f64) < z_r
-                && fp.active[sp as usize]
+                && fp.trench[sp as usize]
             {
                 let d = sd as f64 - fp.converged_km[sp as usize] as f64;
                 if (0.0..wt).contains(&d) {

@@ -846,12 +846,12 @@ pub fn deposit_sediment(
     after_write(&crust_res, &mut gpu, FieldMask::THICKNESS, declared);
 }
 
-/// Sample `i`'s distance to its active subduction front at the last resampling less the
-/// convergence since, km (negative once it went under the overriding plate); `None` for a
-/// sample that is not oceanic crust coming to an active front.
+/// Sample `i`'s distance to its subduction front at the last resampling less the convergence
+/// since, km (negative once it went under the overriding plate); `None` for a sample that is not
+/// oceanic crust coming to a front point with a trench ([`FrontPoints::trench`]).
 fn to_front_km(field: &ConvergenceField, fp: &FrontPoints, oceanic: bool, i: usize) -> Option<f32> {
     let sp = *field.subducting_point.get(i)?;
-    if sp == NONE || !oceanic || !fp.active.get(sp as usize).copied().unwrap_or(false) {
+    if sp == NONE || !oceanic || !fp.trench.get(sp as usize).copied().unwrap_or(false) {
         return None;
     }
     Some(field.subducting_distance_km[i] - fp.converged_km[sp as usize])
@@ -943,7 +943,7 @@ impl FrontReach {
         let (behind_km, ahead_km) = (width_km + spacing_km, width_km + 2.0 * spacing_km);
         let points: Vec<_> = (0..fp.len())
             .map(|k| {
-                if !fp.active.get(k).copied().unwrap_or(false) {
+                if !fp.trench.get(k).copied().unwrap_or(false) {
                     return None;
                 }
                 let o = table.get(fp.overriding[k])?;

@@ -597,6 +597,8 @@ fn amplify_cpu_matches_the_point_function_and_keeps_bounds() {
             z.to_bits(),
             amplify_point(&u, &amp.vertices, q, &mut NoiseMemo::default()).to_bits()
         );
+        // The amplifier's own path (each vertex's terms computed once): the same bits.
+        assert_eq!(z.to_bits(), amp.primitives_of(q).to_bits());
         assert!(
             z.is_finite() && z >= lo && z <= hi,
             "{z} outside {lo}..{hi}"

@@ -145,7 +145,8 @@ pub fn hinted_locate(mesh: &SphereMesh, q: DVec3, hint: u32) -> crate::geometry:
 pub struct Amplifier<'a> {
     /// The reference mesh.
     pub mesh: &'a SphereMesh,
-    /// One entry per sample.
+    /// One entry per sample (read them; the amplifier keeps terms derived from them, so they
+    /// change only through its builder methods).
     pub vertices: Vec<AmplifyVertex>,
     /// Global constants.
     pub uniform: AmplifyUniform,
@@ -156,12 +157,22 @@ pub struct Amplifier<'a> {
     /// River valleys carved into the relief, when a drainage network was given
     /// ([`Self::with_valleys`]).
     pub valleys: Option<Valleys>,
+    /// The per-vertex terms of the procedural primitives, one per vertex (built with them).
+    terms: Vec<procedural::VertexTerms>,
 }
 
 impl<'a> Amplifier<'a> {
     /// Procedural amplification of `crust` (world frame, on `mesh`) with noise seeded by `seed`.
     pub fn new(mesh: &'a SphereMesh, crust: &Crust, seed: u64, options: AmplifyOptions) -> Self {
         let vertices = build_vertices(mesh, crust, seed);
+        let terms = {
+            use rayon::prelude::*;
+            vertices
+                .par_iter()
+                .with_min_len(4096)
+                .map(procedural::VertexTerms::of)
+                .collect()
+        };
         let (lo, hi) = crust
             .elevation_km
             .iter()
@@ -187,6 +198,7 @@ impl<'a> Amplifier<'a> {
             exemplars: None,
             crust_range_m,
             valleys: None,
+            terms,
         }
     }
 
@@ -355,13 +367,20 @@ impl<'a> Amplifier<'a> {
     /// per thread, over a run of nearby queries: the same bits, faster).
     pub fn primitives_of_memo(&self, q: &AmplifyQuery, memo: &mut NoiseMemo) -> f32 {
         match &self.exemplars {
-            None => amplify_point(&self.uniform, &self.vertices, q, memo),
-            Some(set) => {
-                procedural::amplify_point_with(&self.uniform, &self.vertices, q, memo, |v, p, m| {
-                    set.primitive(&self.uniform, v, p)
-                        .unwrap_or_else(|| procedural::procedural_primitive(&self.uniform, v, p, m))
-                })
+            None => {
+                procedural::amplify_point_terms(&self.uniform, &self.vertices, &self.terms, q, memo)
             }
+            Some(set) => procedural::amplify_point_with(
+                &self.uniform,
+                &self.vertices,
+                q,
+                memo,
+                |c, v, p, m| {
+                    set.primitive(&self.uniform, v, p).unwrap_or_else(|| {
+                        procedural::procedural_primitive(&self.uniform, v, &self.terms[c], p, m)
+                    })
+                },
+            ),
         }
     }
 

@@ -367,12 +367,46 @@ fn kept_octaves(u: &AmplifyUniform, wl_km: f32, octaves: u32) -> u32 {
     o
 }
 
+/// What a vertex's primitive computes the same way at every point: built once per vertex
+/// ([`Self::of`]) and kept beside the vertices by the amplifier, so that the points of an export
+/// do not take an exponential and a cross product per corner. The same bits as computed per
+/// point (the same operations).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct VertexTerms {
+    /// Position × grain axis: the primitive's other tangent axis.
+    across: [f32; 3],
+    /// Ocean floor: the share of the hills' relief its age leaves (young floor is rougher).
+    /// Ranges: how fresh the orogeny is (1 new, falling with its age).
+    age_factor: f32,
+}
+
+impl VertexTerms {
+    /// The terms of vertex `v`.
+    #[inline]
+    pub fn of(v: &AmplifyVertex) -> Self {
+        let across = [
+            v.py * v.az - v.pz * v.ay,
+            v.pz * v.ax - v.px * v.az,
+            v.px * v.ay - v.py * v.ax,
+        ];
+        let age_factor = if v.kind == KIND_OCEAN {
+            0.25 + 0.75 * (-v.age_my.max(0.0) / OCEAN_YOUNG_AGE_MY).exp()
+        } else if v.kind == KIND_PLAIN {
+            0.0
+        } else {
+            (-v.age_my.max(0.0) / OROGENY_OLD_AGE_MY).exp()
+        };
+        Self { across, age_factor }
+    }
+}
+
 /// The relief of one vertex's primitive at unit direction `p` (metres), and the amplitude of
 /// the detail layer it asks for (metres). `memo` keeps a noise cell per octave (the same bits
 /// whatever it holds).
 fn vertex_relief(
     u: &AmplifyUniform,
     v: &AmplifyVertex,
+    t: &VertexTerms,
     p: [f32; 3],
     memo: &mut [Cell2; 4],
 ) -> (f32, f32) {
@@ -380,11 +414,7 @@ fn vertex_relief(
     let d = [(p[0] - v.px) * r, (p[1] - v.py) * r, (p[2] - v.pz) * r];
     let a = [v.ax, v.ay, v.az];
     // e2 = position × along: the other tangent axis.
-    let b = [
-        v.py * v.az - v.pz * v.ay,
-        v.pz * v.ax - v.px * v.az,
-        v.px * v.ay - v.py * v.ax,
-    ];
+    let b = t.across;
     let x = d[0] * a[0] + d[1] * a[1] + d[2] * a[2] + v.offset_x_km;
     let y = d[0] * b[0] + d[1] * b[1] + d[2] * b[2] + v.offset_y_km;
     let seed = u.seed;
@@ -392,7 +422,7 @@ fn vertex_relief(
         // Oceanic crust: the vertex axis is the ridge direction, so x runs along the ridge
         // axis and y along the spreading direction.
         let (ridge_axis, spreading_dir) = (x, y);
-        let young = 0.25 + 0.75 * (-v.age_my.max(0.0) / OCEAN_YOUNG_AGE_MY).exp();
+        let young = t.age_factor;
         // Transform faults: lines across the ridge at jittered positions along it.
         let s = x / FAULT_SPACING_KM;
         let (_, ki) = floor_i(s);
@@ -452,7 +482,7 @@ fn vertex_relief(
             (ANDEAN_WAVELENGTH_KM, ANDEAN_STRETCH, ANDEAN_AMP_M)
         };
         let height = mountain_share(v.elevation_m);
-        let fresh = (-v.age_my.max(0.0) / OROGENY_OLD_AGE_MY).exp();
+        let fresh = t.age_factor;
         let amp = amp0 * height * (0.35 + 0.65 * fresh);
         let gain = 0.35 + 0.2 * fresh;
         let mseed = if him {
@@ -550,7 +580,8 @@ fn detail(u: &AmplifyUniform, p: [f32; 3], memo: &mut [Cell3<1>; 2]) -> f32 {
 /// The amplified elevation (metres) of one query: the barycentric crust elevation plus the
 /// blended relief of the three corners' primitives and the detail layer, the relief clamped to
 /// ±[`MAX_RELIEF_M`]. Corners with zero weight are skipped. `primitive` gives the relief of a
-/// corner (see [`procedural_primitive`]; the exemplar amplifier passes its own), with the noise
+/// corner from its index and vertex (see [`procedural_primitive`]; the exemplar amplifier
+/// passes its own), with the noise
 /// cells `memo` keeps for that corner; `memo` is the caller's, kept from one query to the next
 /// (nearby queries share noise cells; the value is the same whatever it holds).
 pub fn amplify_point_with(
@@ -558,7 +589,7 @@ pub fn amplify_point_with(
     vertices: &[AmplifyVertex],
     q: &AmplifyQuery,
     memo: &mut NoiseMemo,
-    mut primitive: impl FnMut(&AmplifyVertex, [f32; 3], &mut [Cell2; 4]) -> (f32, f32),
+    mut primitive: impl FnMut(usize, &AmplifyVertex, [f32; 3], &mut [Cell2; 4]) -> (f32, f32),
 ) -> f32 {
     let p = [q.dx, q.dy, q.dz];
     let corners = [(q.c0, q.w0), (q.c1, q.w1), (q.c2, q.w2)];
@@ -576,7 +607,7 @@ pub fn amplify_point_with(
         // edges, and most points need only one or two primitives).
         let wp = w - BLEND_CUT;
         if wp > 0.0 {
-            let (r, da) = primitive(v, p, &mut memo.corners[k]);
+            let (r, da) = primitive(c as usize, v, p, &mut memo.corners[k]);
             relief += wp * r;
             detail_amp += wp * da;
             w2 += wp * wp;
@@ -589,15 +620,16 @@ pub fn amplify_point_with(
     base + total.clamp(-MAX_RELIEF_M, MAX_RELIEF_M)
 }
 
-/// The procedural primitive of vertex `v` at unit direction `p`: (relief m, detail amplitude m)
-/// (`memo`: see [`amplify_point_with`]).
+/// The procedural primitive of vertex `v` (with its [`VertexTerms`]) at unit direction `p`:
+/// (relief m, detail amplitude m) (`memo`: see [`amplify_point_with`]).
 pub fn procedural_primitive(
     u: &AmplifyUniform,
     v: &AmplifyVertex,
+    terms: &VertexTerms,
     p: [f32; 3],
     memo: &mut [Cell2; 4],
 ) -> (f32, f32) {
-    vertex_relief(u, v, p, memo)
+    vertex_relief(u, v, terms, p, memo)
 }
 
 /// The procedural amplified elevation (metres) of one query (`memo`: see
@@ -608,7 +640,23 @@ pub fn amplify_point(
     q: &AmplifyQuery,
     memo: &mut NoiseMemo,
 ) -> f32 {
-    amplify_point_with(u, vertices, q, memo, |v, p, m| vertex_relief(u, v, p, m))
+    amplify_point_with(u, vertices, q, memo, |_, v, p, m| {
+        vertex_relief(u, v, &VertexTerms::of(v), p, m)
+    })
+}
+
+/// [`amplify_point`] with each vertex's [`VertexTerms`] computed beforehand (`terms[i]` of
+/// `vertices[i]`): the same bits.
+pub fn amplify_point_terms(
+    u: &AmplifyUniform,
+    vertices: &[AmplifyVertex],
+    terms: &[VertexTerms],
+    q: &AmplifyQuery,
+    memo: &mut NoiseMemo,
+) -> f32 {
+    amplify_point_with(u, vertices, q, memo, |c, v, p, m| {
+        vertex_relief(u, v, &terms[c], p, m)
+    })
 }
 
 /// CPU reference of the `amplify` kernel: the amplified elevation (metres) of every query, in

@@ -454,48 +454,75 @@ pub fn export_amplified_on(
         )?),
         None => None,
     };
-    let mut band = Vec::new();
-    let mut queries = Vec::new();
-    let mut row0 = 0;
-    let locate = |d: DVec3, hint: &mut u32| amp.query_hinted(d, hint);
-    while row0 < grid.height {
-        let rows = BAND_ROWS.min(grid.height - row0);
-        match device.as_mut() {
-            Some((kernel, ctx)) => {
-                grid.band_hinted(row0, rows, &locate, &mut queries);
-                band.clear();
-                band.resize(queries.len(), f32::NAN);
-                kernel.run(ctx, &queries, &mut band)?;
-                // The valleys are carved on the CPU, after the kernel.
-                amp.carve_band(
-                    &queries,
-                    &mut band,
-                    grid.width as usize,
-                    valley_block(grid, amp),
-                );
+    // The bands are written on a thread of their own while the next one is computed: encoding
+    // and compressing a band is serial, and would otherwise leave a core idle (a band's
+    // buffer comes back for reuse). A file is finished only once every row came.
+    let width = grid.width as usize;
+    std::thread::scope(|scope| {
+        let (to_writer, bands) = std::sync::mpsc::sync_channel::<Vec<f32>>(1);
+        let (give_back, spare) = std::sync::mpsc::channel::<Vec<f32>>();
+        let writer = scope.spawn(move || -> Result<Vec<PathBuf>, ExportError> {
+            let mut rows = 0u32;
+            for band in bands {
+                for row in band.chunks(width) {
+                    if let Some(w) = png.as_mut() {
+                        w.write_row(row)?;
+                    }
+                    if let Some(w) = tiff.as_mut() {
+                        w.write_row(row)?;
+                    }
+                    rows += 1;
+                }
+                let _ = give_back.send(band);
             }
-            None => amplify_band_cpu(amp, grid, row0, rows, &mut queries, &mut band),
-        }
-        for row in band.chunks(grid.width as usize) {
-            if let Some(w) = png.as_mut() {
-                w.write_row(row)?;
+            let mut files = Vec::new();
+            if rows < grid.height {
+                // The rows stopped coming (an error, returned by the computing side): the
+                // unfinished files are dropped, which removes them.
+                return Ok(files);
             }
-            if let Some(w) = tiff.as_mut() {
-                w.write_row(row)?;
+            if let Some(w) = png {
+                let (a, b) = w.finish()?;
+                files.push(a);
+                files.push(b);
             }
-        }
-        row0 += rows;
-    }
-    let mut files = Vec::new();
-    if let Some(w) = png {
-        let (a, b) = w.finish()?;
-        files.push(a);
-        files.push(b);
-    }
-    if let Some(w) = tiff {
-        files.push(w.finish()?);
-    }
-    Ok(files)
+            if let Some(w) = tiff {
+                files.push(w.finish()?);
+            }
+            Ok(files)
+        });
+        let mut queries = Vec::new();
+        let mut row0 = 0;
+        let locate = |d: DVec3, hint: &mut u32| amp.query_hinted(d, hint);
+        let computed = (|| -> Result<(), ExportError> {
+            while row0 < grid.height {
+                let rows = BAND_ROWS.min(grid.height - row0);
+                let mut band = spare.try_recv().unwrap_or_default();
+                match device.as_mut() {
+                    Some((kernel, ctx)) => {
+                        grid.band_hinted(row0, rows, &locate, &mut queries);
+                        band.clear();
+                        band.resize(queries.len(), f32::NAN);
+                        kernel.run(ctx, &queries, &mut band)?;
+                        // The valleys are carved on the CPU, after the kernel.
+                        amp.carve_band(&queries, &mut band, width, valley_block(grid, amp));
+                    }
+                    None => amplify_band_cpu(amp, grid, row0, rows, &mut queries, &mut band),
+                }
+                if to_writer.send(band).is_err() {
+                    break; // the writer stopped on an error, which its result gives
+                }
+                row0 += rows;
+            }
+            Ok(())
+        })();
+        drop(to_writer);
+        let written = writer
+            .join()
+            .unwrap_or_else(|e| std::panic::resume_unwind(e));
+        computed?;
+        written
+    })
 }
 
 /// Pixels a side of the blocks whose valleys `amp` carves together on `grid` (about

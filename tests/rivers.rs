@@ -31,6 +31,29 @@ fn planet() -> &'static (SphereMesh, Crust, RiverNetwork) {
     })
 }
 
+/// The network of an export or a map is made on the graph without its cotangent weights (only
+/// the diffusion and the flexure read them): the same network, bit for bit, as on the
+/// simulation's graph.
+#[test]
+fn the_network_without_cotangent_weights_is_the_simulations() {
+    use tectonic_planets::systems::relief::network::relief_graph;
+    let (mesh, crust, net) = planet();
+    let mut p = common::params(20_000, 3);
+    p.init.plates = 10;
+    let full = RiverNetwork::on_graph(
+        &relief_graph(mesh),
+        &mesh.positions,
+        crust,
+        NetworkOptions::of(&p),
+    );
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(full.drainage.receiver, net.drainage.receiver);
+    assert_eq!(bits(&full.drainage.area_km2), bits(&net.drainage.area_km2));
+    assert_eq!(full.rain, net.rain);
+    assert_eq!(full.reaches.len(), net.reaches.len());
+    assert!(net.reaches.len() >= 20, "{} reaches", net.reaches.len());
+}
+
 /// [lon, lat] of a GeoJSON position.
 fn position(v: &serde_json::Value) -> [f64; 2] {
     let a = v.as_array().expect("a position is an array");

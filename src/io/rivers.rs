@@ -23,7 +23,7 @@ use crate::systems::relief::drainage::Drainage;
 use crate::systems::relief::graph::ReliefGraph;
 pub use crate::systems::relief::network::NetworkOptions;
 use crate::systems::relief::network::{
-    Reach, basin_outlets, network_of, rain_of, relief_graph, river_reaches, river_threshold_km2,
+    Reach, basin_outlets, drainage_graph, network_of, rain_of, river_reaches, river_threshold_km2,
 };
 
 /// Colour of rivers (sRGB).
@@ -61,7 +61,7 @@ impl RiverNetwork {
     /// and lakes as in the simulation (`opts`: [`NetworkOptions::of`] the run's parameters) and
     /// the threshold of [`river_threshold_km2`].
     pub fn of(mesh: &SphereMesh, crust: &Crust, opts: NetworkOptions) -> Self {
-        Self::on_graph(&relief_graph(mesh), &mesh.positions, crust, opts)
+        Self::on_graph(&drainage_graph(mesh), &mesh.positions, crust, opts)
     }
 
     /// The network as the amplified relief's valleys read it

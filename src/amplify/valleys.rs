@@ -154,6 +154,7 @@ impl Valleys {
     /// each sample's relief primitive, metres (as the amplifier scales it: see
     /// [`relief_amplitude_m`]), which sets the incision and the walls; `seed` seeds the winding.
     pub fn new(mesh: &SphereMesh, drainage: Network<'_>, amp_m: Vec<f32>, seed: u32) -> Self {
+        use rayon::prelude::*;
         let n = mesh.len();
         let spacing_km = mesh.mean_spacing_rad() * mesh.radius_km;
         let max_floor = MAX_FLOOR_KM.min(0.15 * spacing_km);
@@ -211,6 +212,8 @@ impl Valleys {
         // about two entries a sample), and a block of pixels reads one or two cells' lists.
         let cell = GRID_CELL_REACHES * reach_km / mesh.radius_km;
         let frame = (0..n)
+            .into_par_iter()
+            .with_min_len(4096)
             .map(|i| {
                 let r = receiver[i];
                 if r == u32::MAX {
@@ -590,14 +593,15 @@ fn reach_grid(
 ) -> (Vec<u64>, Vec<u32>, Vec<u32>) {
     use rayon::prelude::*;
     let half_diag = 0.5 * cell * 3f64.sqrt();
+    // Each thread lists its reaches' cells in a vector of its own (no vector per reach); the
+    // order does not matter, the pairs are sorted below.
     let mut pairs: Vec<(u64, u32)> = (0..receiver.len())
         .into_par_iter()
         .with_min_len(4096)
-        .flat_map_iter(|i| {
+        .fold(Vec::new, |mut out, i| {
             let r = receiver[i];
-            let mut out = Vec::new();
             if r == u32::MAX {
-                return out.into_iter();
+                return out;
             }
             let (a, b) = (mesh.positions[i], mesh.positions[r as usize]);
             let lo = a.min(b) - DVec3::splat(reach);
@@ -618,9 +622,15 @@ fn reach_grid(
                     }
                 }
             }
-            out.into_iter()
+            out
         })
-        .collect();
+        .reduce(Vec::new, |mut a, mut b| {
+            if a.len() < b.len() {
+                std::mem::swap(&mut a, &mut b);
+            }
+            a.append(&mut b);
+            a
+        });
     pairs.par_sort_unstable();
     let mut keys = Vec::new();
     let mut starts = Vec::new();

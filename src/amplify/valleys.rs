@@ -426,6 +426,12 @@ impl Valleys {
             * self.radius_km;
         self.build_plan(mesh, c, rb, plan);
         let levels = &self.levels[..self.detail];
+        // How far the tributaries below each level run, summed once here (the same sums
+        // [`Tree::surface`] made per call).
+        let mut below = [0.0f64; MAX_LEVELS + 1];
+        for (l, b) in below.iter_mut().enumerate().take(levels.len()) {
+            *b = levels[l + 1..].iter().map(|l| l.max_len_km).sum();
+        }
         for pt in &plan.points {
             let (p, m, cap) = (pt.p, pt.m, pt.cap);
             // Nothing above the cap matters.
@@ -457,6 +463,7 @@ impl Valleys {
                 }
                 let tree = Tree {
                     levels,
+                    below: &below,
                     nodes: &plan.nodes,
                     floor_km: pr.floor,
                     m,
@@ -657,7 +664,8 @@ struct Seg {
 }
 
 /// What a point's distance to a segment needs of it, computed once per segment: its vector
-/// (km), length, unit direction, and squared length (at least 1e-30).
+/// (km), length, unit direction, and the reciprocals of its length and of its squared length
+/// (at least 1e-30), so that points multiply instead of dividing.
 #[derive(Clone, Copy, Debug)]
 struct Geo {
     dx: f64,
@@ -665,7 +673,8 @@ struct Geo {
     len: f64,
     ux: f64,
     uy: f64,
-    len2: f64,
+    inv_len: f64,
+    inv_len2: f64,
 }
 
 impl Geo {
@@ -679,18 +688,20 @@ impl Geo {
             len,
             ux: dx / len,
             uy: dy / len,
-            len2: l2.max(1e-30),
+            inv_len: 1.0 / len,
+            inv_len2: 1.0 / l2.max(1e-30),
         }
     }
 }
 
 /// Where `p` lies against segment `s` (whose [`Geo`] is `g`): its position along the segment's
 /// line (km), the clamped share of the segment at its projection, its distance to the segment,
-/// and its signed distance out from the line (positive on the left), km.
+/// and its signed distance out from the line (positive on the left), km. The segment must not
+/// be degenerate (length over 1e-9 km).
 fn project(s: &Seg, g: &Geo, p: (f64, f64)) -> (f64, f64, f64, f64) {
     let (rx, ry) = (p.0 - s.a.0, p.1 - s.a.1);
     let along = rx * g.ux + ry * g.uy;
-    let t = (along / g.len).clamp(0.0, 1.0);
+    let t = (along * g.inv_len).clamp(0.0, 1.0);
     let (cx, cy) = (rx - g.dx * t, ry - g.dy * t);
     let d = (cx * cx + cy * cy).sqrt();
     let across = ry * g.ux - rx * g.uy;
@@ -701,7 +712,7 @@ fn project(s: &Seg, g: &Geo, p: (f64, f64)) -> (f64, f64, f64, f64) {
 fn seg_distance2(s: &Seg, g: &Geo, p: (f64, f64)) -> f64 {
     let (dx, dy) = (g.dx, g.dy);
     let (rx, ry) = (p.0 - s.a.0, p.1 - s.a.1);
-    let t = ((rx * dx + ry * dy) / g.len2).clamp(0.0, 1.0);
+    let t = ((rx * dx + ry * dy) * g.inv_len2).clamp(0.0, 1.0);
     (rx - dx * t).powi(2) + (ry - dy * t).powi(2)
 }
 
@@ -895,10 +906,12 @@ fn plan_tributaries(
     (start, end)
 }
 
-/// A reach's tree of tributaries in a plan, as one point sees it: the levels carved, the
-/// plan's tributaries, the main valley's floor (km), and the point's wall factor.
+/// A reach's tree of tributaries in a plan, as one point sees it: the levels carved (and how far
+/// the tributaries below each run), the plan's tributaries, the main valley's floor (km), and the point's wall factor.
 struct Tree<'a> {
     levels: &'a [TribLevel],
+    /// Per level: how far the tributaries of the levels below it run, summed, km.
+    below: &'a [f64],
     nodes: &'a [Node],
     floor_km: f64,
     m: f64,
@@ -946,7 +959,7 @@ impl Tree<'_> {
         }
         let reach = rho + fade;
         // How far the tributaries' own tributaries run.
-        let below: f64 = self.levels[level + 1..].iter().map(|l| l.max_len_km).sum();
+        let below = self.below[level];
         for node in &self.nodes[children.0 as usize..children.1 as usize] {
             let trib = &node.seg;
             let bed_j = trib.bed_b;

@@ -600,44 +600,43 @@ fn reach_grid(
 ) -> (Vec<u64>, Vec<u32>, Vec<u32>) {
     use rayon::prelude::*;
     let half_diag = 0.5 * cell * 3f64.sqrt();
-    // Each thread lists its reaches' cells in a vector of its own (no vector per reach); the
-    // order does not matter, the pairs are sorted below.
+    // Each reach's cells come from a lazy iterator (no vector per reach).
     let mut pairs: Vec<(u64, u32)> = (0..receiver.len())
         .into_par_iter()
         .with_min_len(4096)
-        .fold(Vec::new, |mut out, i| {
+        .flat_map_iter(|i| {
             let r = receiver[i];
-            if r == u32::MAX {
-                return out;
-            }
-            let (a, b) = (mesh.positions[i], mesh.positions[r as usize]);
+            let (a, b) = if r == u32::MAX {
+                (DVec3::ZERO, DVec3::ZERO)
+            } else {
+                (mesh.positions[i], mesh.positions[r as usize])
+            };
             let lo = a.min(b) - DVec3::splat(reach);
             let hi = a.max(b) + DVec3::splat(reach);
             let idx = |v: f64| (v / cell).floor() as i64;
+            // No cell for a sample without a receiver (an empty range).
+            let (x0, x1) = if r == u32::MAX {
+                (1, 0)
+            } else {
+                (idx(lo.x), idx(hi.x))
+            };
+            let (y0, y1, z0, z1) = (idx(lo.y), idx(hi.y), idx(lo.z), idx(hi.z));
             let ab = b - a;
-            for x in idx(lo.x)..=idx(hi.x) {
-                for y in idx(lo.y)..=idx(hi.y) {
-                    for z in idx(lo.z)..=idx(hi.z) {
+            (x0..=x1).flat_map(move |x| {
+                (y0..=y1).flat_map(move |y| {
+                    (z0..=z1).filter_map(move |z| {
                         let c = DVec3::new(x as f64 + 0.5, y as f64 + 0.5, z as f64 + 0.5) * cell;
                         if (c.length() - 1.0).abs() > half_diag {
-                            continue; // the cell holds no point of the sphere
+                            return None; // the cell holds no point of the sphere
                         }
                         let t = ((c - a).dot(ab) / ab.length_squared().max(1e-30)).clamp(0.0, 1.0);
-                        if (c - (a + ab * t)).length() <= reach + half_diag {
-                            out.push((cell_key(c, cell), i as u32));
-                        }
-                    }
-                }
-            }
-            out
+                        ((c - (a + ab * t)).length() <= reach + half_diag)
+                            .then(|| (cell_key(c, cell), i as u32))
+                    })
+                })
+            })
         })
-        .reduce(Vec::new, |mut a, mut b| {
-            if a.len() < b.len() {
-                std::mem::swap(&mut a, &mut b);
-            }
-            a.append(&mut b);
-            a
-        });
+        .collect();
     pairs.par_sort_unstable();
     let mut keys = Vec::new();
     let mut starts = Vec::new();

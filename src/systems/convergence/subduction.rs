@@ -109,12 +109,13 @@ pub fn subduction_uplift_cpu(
                 }
             }
             // Only ocean floor makes a trench (not oceanic specks stranded among continents);
-            // with isostatic relief the trench is isostasy's.
+            // with isostatic relief the trench is isostasy's (which reads `FrontPoints::trench`;
+            // the paper's trench here keeps the active points, as the GPU kernel does).
             if !isostatic
                 && sp != NONE
                 && *ct == CrustType::Oceanic
                 && (*z as f64) < z_r
-                && fp.trench[sp as usize]
+                && fp.active[sp as usize]
             {
                 let d = sd as f64 - fp.converged_km[sp as usize] as f64;
                 if (0.0..wt).contains(&d) {

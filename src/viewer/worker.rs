@@ -27,7 +27,7 @@ use crate::resources::params::{ParamValue, Params};
 use crate::resources::plugin_params::PluginParam;
 use crate::resources::{Crust, CrustStats, FrontPoints};
 use crate::systems::relief::graph::ReliefGraph;
-use crate::systems::relief::network::relief_graph;
+use crate::systems::relief::network::drainage_graph;
 
 /// Width of the map lookup grid (pixels); the height is half.
 pub const MAP_WIDTH: u32 = 1024;
@@ -247,7 +247,8 @@ pub struct Snapshot {
     pub lookup: Arc<PixelLookup>,
     /// Unit positions of the reference samples.
     pub positions: Arc<Vec<DVec3>>,
-    /// The sample graph of the reference mesh (for the drainage network).
+    /// The sample graph of the reference mesh, without cotangent weights (for the drainage
+    /// network: see [`drainage_graph`]).
     pub graph: Arc<ReliefGraph>,
     /// The drainage network of `crust`, made on first use ([`Snapshot::rivers`]).
     pub rivers: Arc<OnceLock<RiverNetwork>>,
@@ -481,7 +482,7 @@ impl Worker {
     ) -> Self {
         let lookup = Arc::new(PixelLookup::build(sim.mesh(), MAP_WIDTH, MAP_HEIGHT));
         let positions = Arc::new(sim.mesh().positions.clone());
-        let graph = Arc::new(relief_graph(sim.mesh()));
+        let graph = Arc::new(drainage_graph(sim.mesh()));
         Self {
             sim,
             plugins,
@@ -523,7 +524,7 @@ impl Worker {
         self.sim = sim;
         self.lookup = Arc::new(PixelLookup::build(self.sim.mesh(), MAP_WIDTH, MAP_HEIGHT));
         self.positions = Arc::new(self.sim.mesh().positions.clone());
-        self.graph = Arc::new(relief_graph(self.sim.mesh()));
+        self.graph = Arc::new(drainage_graph(self.sim.mesh()));
         self.mesh_generation += 1;
         self.running = false;
         self.run_until_my = None;

@@ -363,10 +363,11 @@ fn track_fronts_over(dt: f32, t: FrontTracking) {
             // sits on a vertex and the triangle found under it is a tie among the fan around
             // it: about a fifth of the points find no subducting vertex although the slab is
             // one sample away, and their stretch of trench went missing (the trenches came out
-            // as dotted lines). A second point a little ahead, on the subducting side, settles
-            // it for the trench. The uplift and the slab pull keep the point under the front:
-            // the uplift's rate was calibrated with those gaps, and with them filled too the
-            // land rises over long runs (docs/relief.md, "Trenches in dots").
+            // as dotted lines). A second point one spacing ahead, on the subducting side,
+            // settles it for the trench. The uplift and the slab pull keep the test of the
+            // point's own triangle: the uplift's rate was calibrated with those gaps, and with
+            // them filled too the land rose over long runs (docs/relief.md, "Trenches without
+            // gaps").
             let ahead = under || {
                 let p = (w + n_world * probe_rad).normalize();
                 subducting_under(

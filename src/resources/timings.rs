@@ -26,10 +26,10 @@ impl StepTimings {
         }
         v.push(d);
     }
-    /// Records the stages a pass timed itself, `(name, milliseconds)` each (negative or NaN
-    /// read as 0).
-    pub fn record_ms(&mut self, stages: &[(&'static str, f64)]) {
-        for &(name, ms) in stages {
+    /// Records the stages a pass timed itself: `names[k]` took `ms[k]` milliseconds (negative
+    /// or NaN read as 0).
+    pub fn record_ms(&mut self, names: &[&'static str], ms: &[f64]) {
+        for (&name, &ms) in names.iter().zip(ms) {
             let ms = if ms > 0.0 { ms } else { 0.0 };
             self.record(name, Duration::from_secs_f64(ms * 1e-3));
         }

@@ -88,8 +88,8 @@ pub struct Drainage {
     pub lake_sample_count: usize,
     /// Number of samples in pit basins (the flooded region).
     pub region_count: usize,
-    /// Wall time of the sub-passes of the last call, ms: receivers, pit basins, flood, stack,
-    /// areas, lakes' water balance.
+    /// Wall time of the sub-passes of the last call, ms, in the order of
+    /// [`Drainage::STAGES`].
     pub timings_ms: [f64; 6],
     /// Water balance of closed depressions: the largest lake area a catchment keeps, per km² of
     /// (precipitation-weighted) catchment, i.e. runoff / net evaporation from the lake surface.
@@ -222,6 +222,17 @@ impl RadixHeap {
 }
 
 impl Drainage {
+    /// The names [`Self::timings_ms`] are recorded under in the step timings: receivers, pit
+    /// basins, flood, stack, areas, lakes' water balance.
+    pub const STAGES: [&'static str; 6] = [
+        "drainage_receivers",
+        "drainage_pit_basins",
+        "drainage_flood",
+        "drainage_stack",
+        "drainage_areas",
+        "drainage_lake_balance",
+    ];
+
     /// Empty drainage; buffers grow on the first [`Drainage::compute`].
     pub fn new() -> Self {
         Self::default()

@@ -573,15 +573,7 @@ pub fn build_drainage(
         if let Some(search) = search {
             t.record("climate_search", search);
         }
-        let ms = network.drainage.timings_ms;
-        t.record_ms(&[
-            ("drainage_receivers", ms[0]),
-            ("drainage_pit_basins", ms[1]),
-            ("drainage_flood", ms[2]),
-            ("drainage_stack", ms[3]),
-            ("drainage_areas", ms[4]),
-            ("drainage_lake_balance", ms[5]),
-        ]);
+        t.record_ms(&Drainage::STAGES, &network.drainage.timings_ms);
     }
 }
 
@@ -795,13 +787,7 @@ pub fn deposit_sediment(
         &mut flux.deposit_km,
     );
     if let Some(t) = timings.as_mut() {
-        let ms = state.router.timings_ms;
-        t.record_ms(&[
-            ("sediment_setup", ms[0]),
-            ("sediment_land", ms[1]),
-            ("sediment_sea", ms[2]),
-            ("sediment_safety_net", ms[3]),
-        ]);
+        t.record_ms(&SedimentRouter::STAGES, &state.router.timings_ms);
     }
     crust
         .thickness_km

@@ -137,8 +137,7 @@ pub struct SedimentRouter {
     /// Full endorheic basins one overflow may pass through before the rest goes to the nearest
     /// sea (`None`: [`MAX_OVERFLOWS`]).
     pub max_overflows: Option<usize>,
-    /// Milliseconds the last [`Self::route`] spent on its setup, the land (rivers and lakes),
-    /// the sea, and the safety net with the write-out.
+    /// Milliseconds the last [`Self::route`] spent on each of [`SedimentRouter::STAGES`].
     pub timings_ms: [f64; 4],
     flux: Vec<f64>,
     dep: Vec<f64>,
@@ -184,6 +183,9 @@ pub struct SedimentRouter {
     /// Per sample: the index of its lake's floor in `lake_ranges`, or `u32::MAX` where none
     /// was met.
     lake_of: Vec<u32>,
+    /// The room under the water surface of each sample of the floor [`Self::fill_whole_lake`]
+    /// is counting, km³ (the count's terms, laid as they are when the load fills the lake).
+    floor_room: Vec<f64>,
 }
 
 /// The load of one lake, gathered from every river that reaches it in one call and laid on its
@@ -308,6 +310,15 @@ fn rise_pond(target: f64, inv: f64, q: &mut f64, level: &mut f64) -> bool {
 }
 
 impl SedimentRouter {
+    /// The names [`Self::timings_ms`] are recorded under in the step timings: the setup, the
+    /// land (rivers and lakes), the sea, and the safety net with the write-out.
+    pub const STAGES: [&'static str; 4] = [
+        "sediment_setup",
+        "sediment_land",
+        "sediment_sea",
+        "sediment_safety_net",
+    ];
+
     /// New router; buffers grow on first use.
     pub fn new() -> Self {
         Self::default()
@@ -1277,17 +1288,19 @@ impl SedimentRouter {
                 0.0
             }
         };
-        let volume: f64 = self.lake_members[start..end]
-            .iter()
-            .map(|&j| room(&self.dep, j as usize))
-            .sum();
+        self.floor_room.clear();
+        self.floor_room.extend(
+            self.lake_members[start..end]
+                .iter()
+                .map(|&j| room(&self.dep, j as usize)),
+        );
+        let volume: f64 = self.floor_room.iter().sum();
         self.lake_room[id] = volume;
         if lake.q < volume {
             return None;
         }
         for k in start..end {
-            let j = self.lake_members[k] as usize;
-            let v = room(&self.dep, j);
+            let (j, v) = (self.lake_members[k] as usize, self.floor_room[k - start]);
             if v > 0.0 {
                 self.touch_deposit(j, true);
                 self.dep[j] += v;

@@ -671,3 +671,106 @@ fn flood_fill_plates_are_whole_connected_and_resolution_independent() {
         100.0 * same_type
     );
 }
+
+/// The connected pieces of `plate` by a plain depth-first search from each sample in order
+/// (the reference for `defragment_plates`): the piece of every sample, and each piece's plate,
+/// area and samples.
+fn pieces_by_search(mesh: &SphereMesh, plate: &[u32]) -> (Vec<u32>, Vec<(u32, f64, Vec<u32>)>) {
+    let n = mesh.len();
+    let mut piece = vec![u32::MAX; n];
+    let mut pieces = Vec::new();
+    for s in 0..n {
+        if piece[s] != u32::MAX {
+            continue;
+        }
+        let c = pieces.len() as u32;
+        let mut members = Vec::new();
+        let mut stack = vec![s];
+        piece[s] = c;
+        while let Some(u) = stack.pop() {
+            members.push(u as u32);
+            for &v in mesh.neighbors_of(u) {
+                let v = v as usize;
+                if piece[v] == u32::MAX && plate[v] == plate[s] {
+                    piece[v] = c;
+                    stack.push(v);
+                }
+            }
+        }
+        members.sort_unstable();
+        let area = members.iter().map(|&u| mesh.area_km2[u as usize]).sum();
+        pieces.push((plate[s], area, members));
+    }
+    (piece, pieces)
+}
+
+#[test]
+fn defragmenting_makes_every_plate_one_piece_as_a_search_would() {
+    use tectonic_planets::systems::resample::defragment_plates;
+    // 150,000 samples (more than two blocks of the union–find) in 7 plates by a noisy field of
+    // longitude bands: each plate in many pieces, large and small.
+    let mesh = SphereMesh::fibonacci(150_000, 0.3, 5, 6371.0).unwrap();
+    let noise = |p: DVec3| ((p.x * 37.0).sin() + (p.y * 23.0).cos() * (p.z * 31.0).sin()) * 0.6;
+    let labels: Vec<u32> = mesh
+        .positions
+        .iter()
+        .map(|p| {
+            let lon = p.y.atan2(p.x) + noise(*p);
+            (((lon + 4.0 * std::f64::consts::PI) / (2.0 * std::f64::consts::PI / 7.0)) as u32) % 7
+        })
+        .collect();
+    let (_, before) = pieces_by_search(&mesh, &labels);
+    assert!(
+        before.len() > 40,
+        "the test labelling should break plates into many pieces: {}",
+        before.len()
+    );
+    for (min_area, split) in [(f64::INFINITY, false), (200_000.0, true)] {
+        let mut plate = labels.clone();
+        let mut next_id = 7;
+        let splits = defragment_plates(&mesh, &mut plate, min_area, split, &mut next_id);
+        // Every plate is one piece now.
+        let (_, after) = pieces_by_search(&mesh, &plate);
+        let mut ids: Vec<u32> = after.iter().map(|p| p.0).collect();
+        ids.sort_unstable();
+        let len = ids.len();
+        ids.dedup();
+        assert_eq!(
+            ids.len(),
+            len,
+            "a plate left in pieces (min area {min_area})"
+        );
+        // The largest piece of each plate keeps its id and all its samples; pieces at least
+        // `min_area` (when splitting) become plates of their own, numbered in sample order.
+        let mut largest = std::collections::BTreeMap::<u32, usize>::new();
+        for (k, p) in before.iter().enumerate() {
+            let e = largest.entry(p.0).or_insert(k);
+            if p.1 > before[*e].1 {
+                *e = k;
+            }
+        }
+        let mut expected_child = 7;
+        for (k, (p, area, members)) in before.iter().enumerate() {
+            let now: Vec<u32> = members.iter().map(|&u| plate[u as usize]).collect();
+            if largest[p] == k {
+                assert!(
+                    now.iter().all(|&q| q == *p),
+                    "plate {p} lost its largest piece"
+                );
+            } else if split && *area >= min_area {
+                assert!(now.iter().all(|&q| q == expected_child));
+                assert!(
+                    splits
+                        .iter()
+                        .any(|s| s.child == expected_child && s.parent == *p)
+                );
+                expected_child += 1;
+            } else {
+                // Joined a neighbour, whole.
+                assert!(now.iter().all(|&q| q == now[0]));
+            }
+        }
+        assert_eq!(next_id, expected_child);
+        assert_eq!(splits.len() as u32, expected_child - 7);
+    }
+}

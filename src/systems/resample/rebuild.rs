@@ -12,6 +12,25 @@ use crate::components::{
 use crate::geometry::{SphereMesh, angle_between};
 use crate::resources::{Crust, CrustType, NO_PLATE};
 
+/// Joins the sets of `a` and `b` (indices into `parent`, whose entries are sample numbers offset
+/// by `base`), linking the higher root under the lower, so that every root is its set's lowest
+/// sample.
+fn union_lower(parent: &mut [u32], base: usize, a: usize, b: usize) {
+    let find = |parent: &mut [u32], mut x: usize| {
+        while parent[x] as usize - base != x {
+            let up = parent[x] as usize - base;
+            parent[x] = parent[up];
+            x = up;
+        }
+        x
+    };
+    let (ra, rb) = (find(parent, a), find(parent, b));
+    if ra != rb {
+        let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
+        parent[hi] = (lo + base) as u32;
+    }
+}
+
 /// A plate created by splitting a disconnected piece off its parent.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PlateSplit {
@@ -33,37 +52,57 @@ pub fn defragment_plates(
     next_id: &mut u32,
 ) -> Vec<PlateSplit> {
     let n = mesh.len();
-    let mut comp = vec![u32::MAX; n];
-    // (plate, area, first sample, sample count)
-    let mut comps: Vec<(u32, f64)> = Vec::new();
-    let mut members: Vec<u32> = Vec::with_capacity(n);
-    let mut comp_start: Vec<usize> = Vec::new();
-    let mut stack: Vec<u32> = Vec::new();
-    for s in 0..n {
-        if comp[s] != u32::MAX {
-            continue;
-        }
-        let c = comps.len() as u32;
-        let p = plate[s];
-        comp[s] = c;
-        stack.push(s as u32);
-        comp_start.push(members.len());
-        let mut area = 0.0;
-        while let Some(u) = stack.pop() {
-            members.push(u);
-            area += mesh.area_km2[u as usize];
-            for &v in mesh.neighbors_of(u as usize) {
-                if comp[v as usize] == u32::MAX && plate[v as usize] == p {
-                    comp[v as usize] = c;
-                    stack.push(v);
+    // Connected pieces by union–find over the edges to lower-numbered neighbours of the same
+    // plate, every piece rooted at its lowest sample (a link always points to a lower sample),
+    // so that pieces are numbered in the order of their first sample. Each thread joins the
+    // edges within its own block of samples; the edges between blocks are joined after.
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    const BLOCK: usize = 1 << 16;
+    let across: Vec<Vec<(u32, u32)>> = parent
+        .par_chunks_mut(BLOCK)
+        .enumerate()
+        .map(|(b, par)| {
+            let base = b * BLOCK;
+            let mut across = Vec::new();
+            for k in 0..par.len() {
+                let s = base + k;
+                let p = plate[s];
+                for &v in mesh.neighbors_of(s) {
+                    let v = v as usize;
+                    if v >= s || plate[v] != p {
+                        continue;
+                    }
+                    if v < base {
+                        across.push((s as u32, v as u32));
+                    } else {
+                        union_lower(par, base, k, v - base);
+                    }
                 }
             }
-        }
-        comps.push((p, area));
+            across
+        })
+        .collect();
+    for (s, v) in across.into_iter().flatten() {
+        union_lower(&mut parent, 0, s as usize, v as usize);
     }
-    comp_start.push(members.len());
+    // Roots, in sample order: a sample's parent is lower, so its root is already final.
+    let mut comp = vec![u32::MAX; n];
+    let mut comps: Vec<(u32, f64)> = Vec::new();
+    for s in 0..n {
+        let r = parent[s] as usize;
+        if r == s {
+            comp[s] = comps.len() as u32;
+            comps.push((plate[s], 0.0));
+        } else {
+            comp[s] = comp[r];
+            parent[s] = parent[r];
+        }
+    }
     if comps.len() == 1 {
         return Vec::new();
+    }
+    for s in 0..n {
+        comps[comp[s] as usize].1 += mesh.area_km2[s];
     }
     // Largest piece of each plate.
     let mut largest: std::collections::BTreeMap<u32, u32> = std::collections::BTreeMap::new();
@@ -88,13 +127,35 @@ pub fn defragment_plates(
             splits.push(PlateSplit { child, parent: p });
         }
     }
+    // The samples of the pieces that join a neighbour, by piece (in sample order).
+    let mut member_start = vec![0u32; comps.len() + 1];
+    for s in 0..n {
+        let c = comp[s] as usize;
+        if !kept[c] {
+            member_start[c + 1] += 1;
+        }
+    }
+    for c in 0..comps.len() {
+        member_start[c + 1] += member_start[c];
+    }
+    let mut members = vec![0u32; member_start[comps.len()] as usize];
+    {
+        let mut next = member_start.clone();
+        for s in 0..n {
+            let c = comp[s] as usize;
+            if !kept[c] {
+                members[next[c] as usize] = s as u32;
+                next[c] += 1;
+            }
+        }
+    }
     for c in 0..comps.len() {
         if kept[c] {
             continue;
         }
         // Count edges to neighbouring pieces; prefer pieces that are kept.
         let mut counts: Vec<(bool, u32, u32)> = Vec::new(); // (kept, plate, count)
-        for &u in &members[comp_start[c]..comp_start[c + 1]] {
+        for &u in &members[member_start[c] as usize..member_start[c + 1] as usize] {
             for &v in mesh.neighbors_of(u as usize) {
                 let cv = comp[v as usize] as usize;
                 if cv == c {
@@ -139,13 +200,65 @@ pub fn plate_geometry(mesh: &SphereMesh, crust: &Crust) -> Vec<Option<PlateGeome
         .filter(|&p| p != NO_PLATE)
         .max()
         .map_or(0, |m| m as usize + 1);
-    let mut out: Vec<Option<PlateGeometry>> = vec![None; max_id];
+    // Samples per plate first, so that each plate's lists are allocated once.
+    let mut count = vec![0usize; max_id];
+    for &p in &crust.plate {
+        if p != NO_PLATE {
+            count[p as usize] += 1;
+        }
+    }
+    // Each block of triangles lists its plates' triangles (in order) on its own thread; a
+    // plate's triangles are its blocks' lists in block order.
+    const BLOCK: usize = 1 << 16;
+    let blocks: Vec<Vec<Vec<u32>>> = mesh
+        .triangles
+        .par_chunks(BLOCK)
+        .enumerate()
+        .map(|(b, tris)| {
+            let mut lists = vec![Vec::new(); max_id];
+            for (k, tri) in tris.iter().enumerate() {
+                let o = [
+                    crust.plate[tri[0] as usize],
+                    crust.plate[tri[1] as usize],
+                    crust.plate[tri[2] as usize],
+                ];
+                for k2 in 0..3 {
+                    if o[k2] == NO_PLATE || o[..k2].contains(&o[k2]) {
+                        continue;
+                    }
+                    lists[o[k2] as usize].push((b * BLOCK + k) as u32);
+                }
+            }
+            lists
+        })
+        .collect();
+    let mut out: Vec<Option<PlateGeometry>> = (0..max_id)
+        .map(|id| {
+            (count[id] > 0).then(|| {
+                let tris = blocks.iter().map(|l| l[id].len()).sum();
+                let mut triangles = Vec::with_capacity(tris);
+                for l in &blocks {
+                    triangles.extend_from_slice(&l[id]);
+                }
+                PlateGeometry {
+                    mesh: PlateMesh {
+                        samples: Vec::with_capacity(count[id]),
+                        triangles,
+                    },
+                    ..Default::default()
+                }
+            })
+        })
+        .collect();
+    drop(blocks);
     let mut centroid_sum = vec![DVec3::ZERO; max_id];
     for (s, &p) in crust.plate.iter().enumerate() {
         if p == NO_PLATE {
             continue;
         }
-        let g = out[p as usize].get_or_insert_with(Default::default);
+        let Some(g) = out[p as usize].as_mut() else {
+            continue;
+        };
         g.mesh.samples.push(s as u32);
         let a = mesh.area_km2[s];
         g.stats.area_km2 += a;
@@ -154,29 +267,23 @@ pub fn plate_geometry(mesh: &SphereMesh, crust: &Crust) -> Vec<Option<PlateGeome
         }
         centroid_sum[p as usize] += mesh.positions[s] * a;
     }
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        let o = [
-            crust.plate[tri[0] as usize],
-            crust.plate[tri[1] as usize],
-            crust.plate[tri[2] as usize],
-        ];
-        for k in 0..3 {
-            if o[k] == NO_PLATE || o[..k].contains(&o[k]) {
-                continue;
-            }
-            if let Some(g) = out[o[k] as usize].as_mut() {
-                g.mesh.triangles.push(t as u32);
-            }
-        }
-    }
     out.par_iter_mut().enumerate().for_each(|(id, g)| {
         let Some(g) = g.as_mut() else { return };
         let centroid = centroid_sum[id]
             .try_normalize()
             .unwrap_or_else(|| mesh.positions[g.mesh.samples[0] as usize]);
+        // The farthest sample has the least dot product with the centroid: the angle (the
+        // costlier measure) is taken only of the samples within 1e-9 of that least dot, far
+        // more than the rounding of either, so the maximum is the one over all samples.
+        let least = g.mesh.samples.iter().fold(f64::INFINITY, |m, &s| {
+            m.min(centroid.dot(mesh.positions[s as usize]))
+        });
         let mut radius: f64 = 0.0;
         for &s in &g.mesh.samples {
-            radius = radius.max(angle_between(centroid, mesh.positions[s as usize]));
+            let p = mesh.positions[s as usize];
+            if centroid.dot(p) <= least + 1e-9 {
+                radius = radius.max(angle_between(centroid, p));
+            }
         }
         g.bounds = Some(PlateBounds {
             centroid,

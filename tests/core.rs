@@ -672,10 +672,12 @@ fn flood_fill_plates_are_whole_connected_and_resolution_independent() {
     );
 }
 
+/// A connected piece of a plate: its plate, area (km²) and samples (ascending).
+type Piece = (u32, f64, Vec<u32>);
+
 /// The connected pieces of `plate` by a plain depth-first search from each sample in order
-/// (the reference for `defragment_plates`): the piece of every sample, and each piece's plate,
-/// area and samples.
-fn pieces_by_search(mesh: &SphereMesh, plate: &[u32]) -> (Vec<u32>, Vec<(u32, f64, Vec<u32>)>) {
+/// (the reference for `defragment_plates`), in the order of their first sample.
+fn pieces_by_search(mesh: &SphereMesh, plate: &[u32]) -> Vec<Piece> {
     let n = mesh.len();
     let mut piece = vec![u32::MAX; n];
     let mut pieces = Vec::new();
@@ -701,7 +703,7 @@ fn pieces_by_search(mesh: &SphereMesh, plate: &[u32]) -> (Vec<u32>, Vec<(u32, f6
         let area = members.iter().map(|&u| mesh.area_km2[u as usize]).sum();
         pieces.push((plate[s], area, members));
     }
-    (piece, pieces)
+    pieces
 }
 
 #[test]
@@ -719,7 +721,7 @@ fn defragmenting_makes_every_plate_one_piece_as_a_search_would() {
             (((lon + 4.0 * std::f64::consts::PI) / (2.0 * std::f64::consts::PI / 7.0)) as u32) % 7
         })
         .collect();
-    let (_, before) = pieces_by_search(&mesh, &labels);
+    let before = pieces_by_search(&mesh, &labels);
     assert!(
         before.len() > 40,
         "the test labelling should break plates into many pieces: {}",
@@ -730,7 +732,7 @@ fn defragmenting_makes_every_plate_one_piece_as_a_search_would() {
         let mut next_id = 7;
         let splits = defragment_plates(&mesh, &mut plate, min_area, split, &mut next_id);
         // Every plate is one piece now.
-        let (_, after) = pieces_by_search(&mesh, &plate);
+        let after = pieces_by_search(&mesh, &plate);
         let mut ids: Vec<u32> = after.iter().map(|p| p.0).collect();
         ids.sort_unstable();
         let len = ids.len();

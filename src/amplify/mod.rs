@@ -216,7 +216,7 @@ impl<'a> Amplifier<'a> {
     /// assigned (call [`Self::with_exemplars`] first), the procedural one elsewhere.
     pub fn with_valleys(mut self, network: valleys::Network<'_>) -> Self {
         let scale = self.uniform.relief_scale;
-        let amp_m = self
+        let amp_m: Vec<f32> = self
             .vertices
             .iter()
             .map(|v| {
@@ -227,7 +227,28 @@ impl<'a> Amplifier<'a> {
                 exemplar.unwrap_or_else(|| procedural::relief_amplitude_m(v)) * scale
             })
             .collect();
-        self.valleys = Some(Valleys::new(self.mesh, network, amp_m, self.uniform.seed));
+        // The cap keeps only the crests standing a little above the crust (fewer for exemplars,
+        // whose blocks of crests ring more hollows): see [`Valleys::with_crest_floor`].
+        let crest_floor_m = self
+            .vertices
+            .iter()
+            .zip(&amp_m)
+            .map(|(v, &a)| {
+                let exemplar = self
+                    .exemplars
+                    .as_ref()
+                    .is_some_and(|set| set.relief_amplitude_m(v).is_some());
+                a * if exemplar {
+                    valleys::EXEMPLAR_CREST_FLOOR_AMPS
+                } else {
+                    valleys::CREST_FLOOR_AMPS
+                }
+            })
+            .collect();
+        self.valleys = Some(
+            Valleys::new(self.mesh, network, amp_m, self.uniform.seed)
+                .with_crest_floor(crest_floor_m),
+        );
         self
     }
 

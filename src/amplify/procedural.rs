@@ -83,6 +83,9 @@ const DETAIL_WAVELENGTH_KM: f32 = 0.8;
 /// Taken off each barycentric weight to get the primitive's blending weight (negative: not
 /// evaluated). Below 1/3, so at least one primitive always remains.
 const BLEND_CUT: f32 = 0.2;
+/// [`BLEND_CUT`] for a vertex with an exemplar: narrower blends between exemplars, whose
+/// overlaps make closed hollows (docs/amplification.md, "Exemplar-based").
+const EXEMPLAR_BLEND_CUT: f32 = 0.3;
 /// Mean of `ridge(n) = (1 - |n|)²` over gradient noise, measured (see the test
 /// `ridged_noise_is_centred`), subtracted so that blended primitives have zero mean.
 const RIDGE_MEAN: f32 = 0.62;
@@ -598,24 +601,40 @@ pub fn amplify_point_with(
     let mut detail_amp = 0.0f32;
     let mut w2 = 0.0f32;
     let mut wsum = 0.0f32;
+    // Exemplar primitives' weights, summed (see below).
+    let mut wex = 0.0f32;
     for (k, (c, w)) in corners.into_iter().enumerate() {
         let Some(v) = vertices.get(c as usize) else {
             continue;
         };
         base += w * v.elevation_m;
-        // Primitive weights: the barycentric weight less BLEND_CUT (still continuous across
-        // edges, and most points need only one or two primitives).
-        let wp = w - BLEND_CUT;
+        // Primitive weights: the barycentric weight less BLEND_CUT (EXEMPLAR_BLEND_CUT for an
+        // exemplar; still continuous across edges, and most points need only one or two
+        // primitives).
+        let exemplar = v.exemplar != 0;
+        let wp = w - if exemplar {
+            EXEMPLAR_BLEND_CUT
+        } else {
+            BLEND_CUT
+        };
         if wp > 0.0 {
             let (r, da) = primitive(c as usize, v, p, &mut memo.corners[k]);
             relief += wp * r;
             detail_amp += wp * da;
-            w2 += wp * wp;
+            if exemplar {
+                wex += wp;
+            } else {
+                w2 += wp * wp;
+            }
             wsum += wp;
         }
     }
     let detail_amp = detail_amp / wsum.max(1.0e-12);
-    let blended = relief / w2.max(1.0e-12).sqrt();
+    // Procedural primitives are blended keeping their variance (Σw·r / √Σw²: uncorrelated noise
+    // keeps its amplitude), exemplars linearly (Σw·r / Σw): two exemplars' drained relief,
+    // each shifted and rotated on its own, summed at full amplitude ring hollows between one's
+    // crests and the other's valleys. The two terms join continuously as a weight comes in.
+    let blended = relief / (w2 + wex * wex).max(1.0e-12).sqrt();
     let total = (blended + detail_amp * detail(u, p, &mut memo.detail)) * u.relief_scale;
     base + total.clamp(-MAX_RELIEF_M, MAX_RELIEF_M)
 }

@@ -24,7 +24,8 @@
 //! first moved by a smooth random field, so that the valleys wind.
 //!
 //! **The cap.** The detailed elevation is the lowest of all these surfaces and a cap: the crust
-//! plus half an amplitude plus the primitives' crests on land, the primitives' elevation at sea.
+//! plus half an amplitude plus the primitives' crests on land (their relief beyond a floor of a
+//! fraction of an amplitude above the crust), the primitives' elevation at sea.
 //! A function without local minima stays without them under such a minimum, so the floors
 //! drain: the closed pits left are hollows ringed by the primitives' crests on the divides, and
 //! the coarse network's closed basins and lakes.
@@ -72,6 +73,11 @@ const WALL_RISE_AMPS: f64 = 0.6;
 const WALL_RUN_SHARE: f64 = 0.75;
 /// Crust elevation over which the cap grows from nothing to its full height, metres.
 const CAP_RAMP_M: f64 = 100.0;
+/// The cap keeps only the primitives' crests standing more than this many amplitudes above the
+/// crust (see [`Valleys::with_crest_floor`]; the amplifier's choice).
+pub const CREST_FLOOR_AMPS: f32 = 0.15;
+/// [`CREST_FLOOR_AMPS`] on a sample with an exemplar.
+pub const EXEMPLAR_CREST_FLOOR_AMPS: f32 = 0.3;
 /// Reach of a river's valley from its course, in mesh spacings.
 const REACH_SPACINGS: f64 = 0.6;
 /// Width of the reach grid's cells, in valley reaches (`REACH_SPACINGS` mesh spacings).
@@ -125,6 +131,9 @@ pub struct Valleys {
     slope: Vec<f32>,
     /// Amplitude of each sample's relief primitive, metres.
     amp_m: Vec<f32>,
+    /// How far above the crust each sample's crests must stand to show on the cap, metres
+    /// (empty: 0 everywhere; see [`Valleys::with_crest_floor`]).
+    crest_floor_m: Vec<f32>,
     /// The plane of each sample's reach: unit vectors downstream and to its left (chords: a
     /// reach is a few tens of km on a planet of thousands), and its length, km (0: no reach).
     frame: Vec<(DVec3, DVec3, f64)>,
@@ -251,6 +260,7 @@ impl Valleys {
             floor_km,
             slope,
             amp_m,
+            crest_floor_m: Vec::new(),
             frame,
             reach_km,
             trib_reach_km: levels.iter().map(|l| l.max_len_km).sum(),
@@ -275,6 +285,21 @@ impl Valleys {
             .iter()
             .map(|l| l.max_len_km)
             .sum();
+    }
+
+    /// Raises the floor of each sample's crests on the divides' cap: only the primitives'
+    /// relief more than `floor_m[i]` metres above the crust stands on the cap (one value per
+    /// mesh sample, interpolated like the amplitudes; of another length, ignored). Crests a
+    /// little above the crust ring closed hollows on the flat cap where no valley reaches;
+    /// the amplifier sets [`CREST_FLOOR_AMPS`] of each sample's amplitude
+    /// ([`EXEMPLAR_CREST_FLOOR_AMPS`] with an exemplar, whose blocks of crests ring more of
+    /// them than the procedural ridges that run along the range). Measured in
+    /// docs/amplification.md.
+    pub fn with_crest_floor(mut self, floor_m: Vec<f32>) -> Self {
+        if floor_m.len() == self.amp_m.len() {
+            self.crest_floor_m = floor_m;
+        }
+        self
     }
 
     /// Tributary levels carved (see [`Self::set_pixel_km`]).
@@ -360,7 +385,8 @@ impl Valleys {
             )
             .max(30.0);
             // On land the valleys' walls are capped by the crust raised a little, with the
-            // primitives' crests (their relief above the crust) on top: the divides keep their
+            // primitives' crests (their relief above the crust, less the floor of
+            // `crest_floor_m`) on top: the divides keep their
             // peaks, and their cols drain (the crust is flat or tilted within a triangle, so the
             // cap has no pit of its own). At sea the cap is the primitives' elevation.
             // Continuous: the land's cap takes over within the first CAP_RAMP_M of crust
@@ -368,7 +394,17 @@ impl Valleys {
             let amplified = *z;
             let land = (f64::from(base) / CAP_RAMP_M).clamp(0.0, 1.0);
             let relief = f64::from(amplified - base);
-            let land_cap = f64::from(base) + CAP_AMPS * amp_here + relief.max(0.0);
+            let crests = if self.crest_floor_m.is_empty() {
+                relief.max(0.0)
+            } else {
+                let floor = f64::from(
+                    q.w0 * self.crest_floor_m[corners[0]]
+                        + q.w1 * self.crest_floor_m[corners[1]]
+                        + q.w2 * self.crest_floor_m[corners[2]],
+                );
+                (relief - floor).max(0.0)
+            };
+            let land_cap = f64::from(base) + CAP_AMPS * amp_here + crests;
             let cap = f64::from(amplified) + (land_cap - f64::from(amplified)) * land;
             // The grid lists the reaches within reach of any point of a cell moved by at most
             // the warp, so the cell of the point itself is the one to read.

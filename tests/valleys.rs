@@ -68,6 +68,26 @@ fn tile(amp: &Amplifier, lat0: f64, lon0: f64, size_deg: f64) -> (Vec<f32>, usiz
     (z, g.width as usize, g.height as usize)
 }
 
+/// Checks two 100 m tiles of the test continent, the range's flank and the plains towards the
+/// coast: without valleys (`plain`) over 5% of the land lies in closed pits deeper than 10 m (so
+/// the measure can fail), with them (`carved`) at most 1%.
+fn assert_tiles_drain(plain: &Amplifier, carved: &Amplifier, what: &str) {
+    for (lat0, lon0) in [(4.0, 34.0), (-10.0, 47.0)] {
+        let (z0, w, h) = tile(plain, lat0, lon0, 0.5);
+        let (z1, _, _) = tile(carved, lat0, lon0, 0.5);
+        let before = pit_share(&z0, w, h, 10.0, None);
+        let after = pit_share(&z1, w, h, 10.0, None);
+        println!(
+            "{what}, tile at ({lat0}, {lon0}), {w}x{h}: land in pits deeper than 10 m {:.2}% without valleys, {:.2}% with",
+            100.0 * before.share(),
+            100.0 * after.share()
+        );
+        assert!(after.land_cells > w * h / 2, "the tile is mostly land");
+        assert!(before.share() > 0.05, "{what}, without valleys: {before:?}");
+        assert!(after.share() <= 0.01, "{what}, with valleys: {after:?}");
+    }
+}
+
 /// At the default planet's resolution (500,000 samples). Coarser meshes leave more: their
 /// reaches lie farther apart and the divides between them keep more of the primitives' noise
 /// (2–4% of the land in pits at 160,000 samples; docs/amplification.md).
@@ -76,22 +96,7 @@ fn amplified_tile_drains_to_few_closed_pits() {
     let (mesh, crust) = continent(500_000);
     let net = network(&mesh, &crust);
     let (plain, carved) = amplifiers(&mesh, &crust, &net, 3);
-    // Two tiles: the range's flank, and the plains towards the coast.
-    for (lat0, lon0) in [(4.0, 34.0), (-10.0, 47.0)] {
-        let (z0, w, h) = tile(&plain, lat0, lon0, 0.5);
-        let (z1, _, _) = tile(&carved, lat0, lon0, 0.5);
-        let before = pit_share(&z0, w, h, 10.0, None);
-        let after = pit_share(&z1, w, h, 10.0, None);
-        println!(
-            "tile at ({lat0}, {lon0}), {w}x{h}: land in pits deeper than 10 m {:.2}% without valleys, {:.2}% with",
-            100.0 * before.share(),
-            100.0 * after.share()
-        );
-        assert!(after.land_cells > w * h / 2, "the tile is mostly land");
-        // The measure can fail: the primitives alone leave many pits.
-        assert!(before.share() > 0.05, "without valleys: {before:?}");
-        assert!(after.share() <= 0.01, "with valleys: {after:?}");
-    }
+    assert_tiles_drain(&plain, &carved, "procedural");
 }
 
 /// The same with the shipped exemplars in place of the procedural relief on the continent: the
@@ -109,19 +114,7 @@ fn amplified_tile_with_exemplars_drains_to_few_closed_pits() {
     let carved = Amplifier::new(&mesh, &crust, 3, opts)
         .with_exemplars(set, 3, opts)
         .with_valleys(net.valley_network());
-    for (lat0, lon0) in [(4.0, 34.0), (-10.0, 47.0)] {
-        let (z0, w, h) = tile(&plain, lat0, lon0, 0.5);
-        let (z1, _, _) = tile(&carved, lat0, lon0, 0.5);
-        let before = pit_share(&z0, w, h, 10.0, None);
-        let after = pit_share(&z1, w, h, 10.0, None);
-        println!(
-            "exemplars, tile at ({lat0}, {lon0}): land in pits deeper than 10 m {:.2}% without valleys, {:.2}% with",
-            100.0 * before.share(),
-            100.0 * after.share()
-        );
-        assert!(before.share() > 0.05, "without valleys: {before:?}");
-        assert!(after.share() <= 0.01, "with valleys: {after:?}");
-    }
+    assert_tiles_drain(&plain, &carved, "exemplars");
 }
 
 #[test]

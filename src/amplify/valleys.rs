@@ -61,8 +61,10 @@ const WARP_WAVELENGTH_SHARE: f64 = 1.5;
 /// warp moves a point by at most `WARP_MAX · WARP_SHARE` (about 0.4) of that spacing.
 const WARP_MAX: f64 = 2.6;
 /// How much the primitives' relief steepens or flattens the valleys' walls: the walls' slope
-/// is multiplied by 1 + this × (relief / amplitude), within [`MOD_RANGE`].
-const MOD_GAIN: f64 = 0.6;
+/// is multiplied by 1 + this × (relief / amplitude), within [`MOD_RANGE`]. A wall whose slope
+/// varies from place to place has hollows along it where a band of gentle slope crosses it:
+/// 0.6 left 1.2–1.4% of the land of high 100 m tiles in closed pits (docs/amplification.md).
+const MOD_GAIN: f64 = 0.3;
 const MOD_RANGE: (f64, f64) = (0.6, 1.6);
 /// The primitives' elevation caps the valleys' surfaces this many amplitudes above itself.
 const CAP_AMPS: f64 = 0.5;

@@ -216,7 +216,10 @@ impl<'a> Amplifier<'a> {
     /// assigned (call [`Self::with_exemplars`] first), the procedural one elsewhere.
     pub fn with_valleys(mut self, network: valleys::Network<'_>) -> Self {
         let scale = self.uniform.relief_scale;
-        let amp_m: Vec<f32> = self
+        // Each sample's amplitude, and the floor its crests must clear on the divides' cap
+        // (higher for exemplars, whose blocks of crests ring more hollows: see
+        // [`Valleys::new`]).
+        let (amp_m, crest_floor_m): (Vec<f32>, Vec<f32>) = self
             .vertices
             .iter()
             .map(|v| {
@@ -224,31 +227,22 @@ impl<'a> Amplifier<'a> {
                     .exemplars
                     .as_ref()
                     .and_then(|s| s.relief_amplitude_m(v));
-                exemplar.unwrap_or_else(|| procedural::relief_amplitude_m(v)) * scale
-            })
-            .collect();
-        // The cap keeps only the crests standing a little above the crust (fewer for exemplars,
-        // whose blocks of crests ring more hollows): see [`Valleys::with_crest_floor`].
-        let crest_floor_m = self
-            .vertices
-            .iter()
-            .zip(&amp_m)
-            .map(|(v, &a)| {
-                let exemplar = self
-                    .exemplars
-                    .as_ref()
-                    .is_some_and(|set| set.relief_amplitude_m(v).is_some());
-                a * if exemplar {
+                let floor = if exemplar.is_some() {
                     valleys::EXEMPLAR_CREST_FLOOR_AMPS
                 } else {
                     valleys::CREST_FLOOR_AMPS
-                }
+                };
+                let amp = exemplar.unwrap_or_else(|| procedural::relief_amplitude_m(v)) * scale;
+                (amp, floor * amp)
             })
-            .collect();
-        self.valleys = Some(
-            Valleys::new(self.mesh, network, amp_m, self.uniform.seed)
-                .with_crest_floor(crest_floor_m),
-        );
+            .unzip();
+        self.valleys = Some(Valleys::new(
+            self.mesh,
+            network,
+            amp_m,
+            crest_floor_m,
+            self.uniform.seed,
+        ));
         self
     }
 

@@ -76,7 +76,7 @@ const WALL_RUN_SHARE: f64 = 0.75;
 /// Crust elevation over which the cap grows from nothing to its full height, metres.
 const CAP_RAMP_M: f64 = 100.0;
 /// The cap keeps only the primitives' crests standing more than this many amplitudes above the
-/// crust (see [`Valleys::with_crest_floor`]; the amplifier's choice).
+/// crust (see [`Valleys::new`]; the amplifier's choice).
 pub const CREST_FLOOR_AMPS: f32 = 0.15;
 /// [`CREST_FLOOR_AMPS`] on a sample with an exemplar.
 pub const EXEMPLAR_CREST_FLOOR_AMPS: f32 = 0.3;
@@ -133,8 +133,8 @@ pub struct Valleys {
     slope: Vec<f32>,
     /// Amplitude of each sample's relief primitive, metres.
     amp_m: Vec<f32>,
-    /// How far above the crust each sample's crests must stand to show on the cap, metres
-    /// (empty: 0 everywhere; see [`Valleys::with_crest_floor`]).
+    /// How far above the crust each sample's crests must stand to show on the cap, metres (see
+    /// [`Valleys::new`]).
     crest_floor_m: Vec<f32>,
     /// The plane of each sample's reach: unit vectors downstream and to its left (chords: a
     /// reach is a few tens of km on a planet of thousands), and its length, km (0: no reach).
@@ -163,10 +163,27 @@ pub struct Valleys {
 impl Valleys {
     /// The valleys of `drainage` (a network of the crust on `mesh`); `amp_m` is the amplitude of
     /// each sample's relief primitive, metres (as the amplifier scales it: see
-    /// [`relief_amplitude_m`]), which sets the incision and the walls; `seed` seeds the winding.
-    pub fn new(mesh: &SphereMesh, drainage: Network<'_>, amp_m: Vec<f32>, seed: u32) -> Self {
+    /// [`relief_amplitude_m`]), which sets the incision and the walls; `crest_floor_m` how far
+    /// above the crust each sample's crests must stand to show on the divides' cap, metres
+    /// (crests a little above the crust ring closed hollows on the flat cap where no valley
+    /// reaches; the amplifier gives [`CREST_FLOOR_AMPS`] of the amplitude, or
+    /// [`EXEMPLAR_CREST_FLOOR_AMPS`] with an exemplar, whose blocks of crests ring more of them
+    /// than the procedural ridges running along the range; of another length than the mesh: 0
+    /// everywhere); `seed` seeds the winding.
+    pub fn new(
+        mesh: &SphereMesh,
+        drainage: Network<'_>,
+        amp_m: Vec<f32>,
+        crest_floor_m: Vec<f32>,
+        seed: u32,
+    ) -> Self {
         use rayon::prelude::*;
         let n = mesh.len();
+        let crest_floor_m = if crest_floor_m.len() == n {
+            crest_floor_m
+        } else {
+            vec![0.0; n]
+        };
         let spacing_km = mesh.mean_spacing_rad() * mesh.radius_km;
         let max_floor = MAX_FLOOR_KM.min(0.15 * spacing_km);
         let reach_km = REACH_SPACINGS * spacing_km;
@@ -262,7 +279,7 @@ impl Valleys {
             floor_km,
             slope,
             amp_m,
-            crest_floor_m: Vec::new(),
+            crest_floor_m,
             frame,
             reach_km,
             trib_reach_km: levels.iter().map(|l| l.max_len_km).sum(),
@@ -287,21 +304,6 @@ impl Valleys {
             .iter()
             .map(|l| l.max_len_km)
             .sum();
-    }
-
-    /// Raises the floor of each sample's crests on the divides' cap: only the primitives'
-    /// relief more than `floor_m[i]` metres above the crust stands on the cap (one value per
-    /// mesh sample, interpolated like the amplitudes; of another length, ignored). Crests a
-    /// little above the crust ring closed hollows on the flat cap where no valley reaches;
-    /// the amplifier sets [`CREST_FLOOR_AMPS`] of each sample's amplitude
-    /// ([`EXEMPLAR_CREST_FLOOR_AMPS`] with an exemplar, whose blocks of crests ring more of
-    /// them than the procedural ridges that run along the range). Measured in
-    /// docs/amplification.md.
-    pub fn with_crest_floor(mut self, floor_m: Vec<f32>) -> Self {
-        if floor_m.len() == self.amp_m.len() {
-            self.crest_floor_m = floor_m;
-        }
-        self
     }
 
     /// Tributary levels carved (see [`Self::set_pixel_km`]).
@@ -396,16 +398,12 @@ impl Valleys {
             let amplified = *z;
             let land = (f64::from(base) / CAP_RAMP_M).clamp(0.0, 1.0);
             let relief = f64::from(amplified - base);
-            let crests = if self.crest_floor_m.is_empty() {
-                relief.max(0.0)
-            } else {
-                let floor = f64::from(
-                    q.w0 * self.crest_floor_m[corners[0]]
-                        + q.w1 * self.crest_floor_m[corners[1]]
-                        + q.w2 * self.crest_floor_m[corners[2]],
-                );
-                (relief - floor).max(0.0)
-            };
+            let floor = f64::from(
+                q.w0 * self.crest_floor_m[corners[0]]
+                    + q.w1 * self.crest_floor_m[corners[1]]
+                    + q.w2 * self.crest_floor_m[corners[2]],
+            );
+            let crests = (relief - floor).max(0.0);
             let land_cap = f64::from(base) + CAP_AMPS * amp_here + crests;
             let cap = f64::from(amplified) + (land_cap - f64::from(amplified)) * land;
             // The grid lists the reaches within reach of any point of a cell moved by at most

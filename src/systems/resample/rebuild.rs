@@ -85,24 +85,23 @@ pub fn defragment_plates(
     for (s, v) in across.into_iter().flatten() {
         union_lower(&mut parent, 0, s as usize, v as usize);
     }
-    // Roots, in sample order: a sample's parent is lower, so its root is already final.
+    // Pieces and their areas, in sample order: a sample's parent is lower, so its piece is
+    // known by then.
     let mut comp = vec![u32::MAX; n];
     let mut comps: Vec<(u32, f64)> = Vec::new();
     for s in 0..n {
         let r = parent[s] as usize;
-        if r == s {
-            comp[s] = comps.len() as u32;
+        let c = if r == s {
             comps.push((plate[s], 0.0));
+            comps.len() - 1
         } else {
-            comp[s] = comp[r];
-            parent[s] = parent[r];
-        }
+            comp[r] as usize
+        };
+        comp[s] = c as u32;
+        comps[c].1 += mesh.area_km2[s];
     }
     if comps.len() == 1 {
         return Vec::new();
-    }
-    for s in 0..n {
-        comps[comp[s] as usize].1 += mesh.area_km2[s];
     }
     // Largest piece of each plate.
     let mut largest: std::collections::BTreeMap<u32, u32> = std::collections::BTreeMap::new();

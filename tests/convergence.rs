@@ -460,15 +460,14 @@ fn southern_continent() -> (DVec3, impl Fn(DVec3) -> (CrustType, f32, f32) + Cop
     (centre, south)
 }
 
-/// `collision.resample_at_suture` off: the terrane leaves its plate at once (a plate of its own,
-/// moving with the plate it joins) and sutures at the next regular resampling.
+/// `collision.resample_at_suture` off (the default): the terrane leaves its plate at once (a
+/// plate of its own, moving with the plate it joins) and sutures at the next regular resampling.
 #[test]
 fn continents_collide_and_the_terrane_changes_plate() {
     continents_collide(false);
 }
 
-/// `collision.resample_at_suture` on (the default): the collision resamples at once (the
-/// paper's way).
+/// `collision.resample_at_suture` on: the collision resamples at once (the paper's way).
 #[test]
 fn continents_collide_and_resample_at_once() {
     continents_collide(true);

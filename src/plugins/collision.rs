@@ -1,7 +1,8 @@
 //! Continental collisions (phenomenon [`COLLISION`], paper §4.2): a terrane more than the
-//! interpenetration threshold under another plate's continent sutures to it at a resampling (in
-//! its step, or with `collision.resample_at_suture` off the next regular one, the terrane moving
-//! with that plate meanwhile), with a Himalayan surge around it. Systems:
+//! interpenetration threshold under another plate's continent sutures to it at a resampling (the
+//! next regular one, the terrane moving with that plate meanwhile; with
+//! `collision.resample_at_suture` on, one the collision forces in its step), with a Himalayan
+//! surge around it. Systems:
 //! [`crate::systems::convergence::collision`]; GPU kernel: [`crate::gpu::collision_uplift`].
 
 use bevy_app::{App, Plugin};

@@ -31,11 +31,11 @@
 //! - **Collisions** fire when continental crust of a subducting plate is more than
 //!   `collision.interpenetration_km` past a front where the overriding crust is continental too
 //!   (and at any depth when a resampling is about to run, so that no continental crust is lost
-//!   under another plate). The smaller of the two terranes in contact sutures to the other plate
-//!   at a resampling that the collision forces in its step (`collision.resample_at_suture`, the
-//!   default); with that off, it leaves its plate at once as a plate of its own that keeps its
-//!   old plate's frame and moves with the other plate, and sutures at the next regular
-//!   resampling. Then the crust around the suture (d measured
+//!   under another plate). The smaller of the two terranes in contact leaves its plate at once
+//!   as a plate of its own that keeps its old plate's frame and moves with the other plate, and
+//!   sutures to that plate at the next regular resampling (the default); with
+//!   `collision.resample_at_suture` on (the paper's way), the collision forces a resampling in
+//!   its step and sutures there. Then the crust around the suture (d measured
 //!   from the terrane's samples that touch the plate it joins) rises by Δz = Δz₀·(1 − (d/r)²)²
 //!   and thickens by Δz/(1 − ρ_c/ρ_m), r = r_c·min(1, √(v/v0·A/A0)), Δz₀ = H·(1 − exp(−Δ_c·A/H)) (the
 //!   paper's Δ_c·A for small terranes, saturating at H = `collision.max_uplift_km` for

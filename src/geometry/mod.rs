@@ -7,6 +7,7 @@ pub mod locator;
 pub mod mesh;
 pub mod sampling;
 pub mod spherical;
+pub mod union_find;
 
 pub use locator::{Location, MeshLocator};
 pub use mesh::{MeshError, SphereMesh};

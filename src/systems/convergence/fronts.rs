@@ -12,6 +12,7 @@ use crate::components::{
     FrontKind, Plate, PlateBounds, PlateFrame, PlateId, PlateMotion, PlateStats, SubductionFront,
 };
 use crate::geometry::SphereMesh;
+use crate::geometry::union_find::{find_lowest, union_lowest};
 use crate::gpu::{FieldMask, GpuContext};
 use crate::resources::convergence::NONE;
 use crate::resources::params::Params;
@@ -86,14 +87,7 @@ pub fn build_fronts(world: &mut World) {
     tracing::debug!(edges = edges.len(), "converging edges");
     let _t_runs = crate::systems::DebugTimer::new("front runs and points");
     // 2. Runs: edges of the same plate pair sharing a vertex.
-    let mut parent: Vec<usize> = (0..edges.len()).collect();
-    fn find(p: &mut [usize], mut x: usize) -> usize {
-        while p[x] != x {
-            p[x] = p[p[x]];
-            x = p[x];
-        }
-        x
-    }
+    let mut parent: Vec<u32> = (0..edges.len() as u32).collect();
     let mut by_vertex: std::collections::HashMap<(u32, u32, u32), usize> =
         std::collections::HashMap::new();
     for (i, e) in edges.iter().enumerate() {
@@ -101,10 +95,7 @@ pub fn build_fronts(world: &mut World) {
         for v in [e.a, e.b] {
             match by_vertex.get(&(pair.0, pair.1, v)) {
                 Some(&j) => {
-                    let (ri, rj) = (find(&mut parent, i), find(&mut parent, j));
-                    if ri != rj {
-                        parent[ri.max(rj)] = ri.min(rj);
-                    }
+                    union_lowest(&mut parent, 0, i, j);
                 }
                 None => {
                     by_vertex.insert((pair.0, pair.1, v), i);
@@ -115,7 +106,7 @@ pub fn build_fronts(world: &mut World) {
     drop(by_vertex);
     let mut runs: std::collections::BTreeMap<usize, Vec<usize>> = std::collections::BTreeMap::new();
     for i in 0..edges.len() {
-        let r = find(&mut parent, i);
+        let r = find_lowest(&mut parent, 0, i);
         runs.entry(r).or_default().push(i);
     }
 

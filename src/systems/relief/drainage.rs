@@ -1060,21 +1060,6 @@ pub fn sea_mask_with(
     let parent = &mut s.parent[..];
     // 1. Union–find over the edges j < i between samples at or below sea level; a root is
     //    always the smallest sample of its set (the larger root is linked under the smaller).
-    #[inline]
-    fn find(parent: &mut [u32], mut x: u32) -> u32 {
-        loop {
-            let p = parent[x as usize];
-            if p == x {
-                return x;
-            }
-            let gp = parent[p as usize];
-            parent[x as usize] = gp;
-            if gp == p {
-                return p;
-            }
-            x = gp;
-        }
-    }
     for i in 0..n {
         if !below(i) {
             continue;
@@ -1085,7 +1070,7 @@ pub fn sea_mask_with(
             if j as usize >= i || !below(j as usize) {
                 continue;
             }
-            let rj = find(parent, j);
+            let rj = crate::geometry::union_find::find_lowest(parent, 0, j as usize) as u32;
             if rj < ri {
                 parent[ri as usize] = rj;
                 ri = rj;

@@ -9,27 +9,9 @@ use rayon::prelude::*;
 use crate::components::{
     Plate, PlateBounds, PlateFrame, PlateId, PlateMesh, PlateMotion, PlateStats,
 };
+use crate::geometry::union_find::union_lowest;
 use crate::geometry::{SphereMesh, angle_between};
 use crate::resources::{Crust, CrustType, NO_PLATE};
-
-/// Joins the sets of `a` and `b` (indices into `parent`, whose entries are sample numbers offset
-/// by `base`), linking the higher root under the lower, so that every root is its set's lowest
-/// sample.
-fn union_lower(parent: &mut [u32], base: usize, a: usize, b: usize) {
-    let find = |parent: &mut [u32], mut x: usize| {
-        while parent[x] as usize - base != x {
-            let up = parent[x] as usize - base;
-            parent[x] = parent[up];
-            x = up;
-        }
-        x
-    };
-    let (ra, rb) = (find(parent, a), find(parent, b));
-    if ra != rb {
-        let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
-        parent[hi] = (lo + base) as u32;
-    }
-}
 
 /// A plate created by splitting a disconnected piece off its parent.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -75,7 +57,7 @@ pub fn defragment_plates(
                     if v < base {
                         across.push((s as u32, v as u32));
                     } else {
-                        union_lower(par, base, k, v - base);
+                        union_lowest(par, base, k, v - base);
                     }
                 }
             }
@@ -83,7 +65,7 @@ pub fn defragment_plates(
         })
         .collect();
     for (s, v) in across.into_iter().flatten() {
-        union_lower(&mut parent, 0, s as usize, v as usize);
+        union_lowest(&mut parent, 0, s as usize, v as usize);
     }
     // Pieces and their areas, in sample order: a sample's parent is lower, so its piece is
     // known by then.

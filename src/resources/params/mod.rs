@@ -251,7 +251,7 @@ define_params! {
     [subduction] Subduction {
         distance_km: f64 = 900.0, 10.0..=10000.0, "km", "Subduction distance r_s: reach of the uplift on the overriding plate (paper: 1800 km; 900 km keeps active margins 200–750 km wide, as the Andes, DESIGN §7).";
         control_distance_km: f64 = 300.0, 1.0..=10000.0, "km", "Distance from the front where subduction uplift peaks (Driftworld: r_c = 0.1 R = 637 km; 300 km puts the range about where arcs stand, 200 km behind the trench, DESIGN §7).";
-        uplift_mm_per_yr: f64 = 1.05, 0.0..=100.0, "mm/yr", "Base subduction uplift u0 (paper: 0.6 mm/yr). With isostasy on, the surface rise before compensation: the crust thickens by u/(1 − ρ_c/ρ_m). 1.05 since collisions sutured in place became the default (2026-12-05; 0.9 before).";
+        uplift_mm_per_yr: f64 = 1.1, 0.0..=100.0, "mm/yr", "Base subduction uplift u0 (paper: 0.6 mm/yr). With isostasy on, the surface rise before compensation: the crust thickens by u/(1 − ρ_c/ρ_m). 1.1 since the trench follows the floor's path to the overriding plate (2026-12-05; 1.05 with collisions sutured in place, 0.9 before).";
         fold_weight: f64 = 0.1, 0.0..=10.0, "", "β: weight of the relative plate velocity in the fold direction update.";
         slab_pull_perturbation: f64 = 1.0, 0.0..=100.0, "", "Slab pull ε: the Euler pole of a subducting plate turns by 0.01·ε rad/My per radian of subduction front (normalised by front length, so independent of the sample count).";
         trench_width_km: f64 = 200.0, 1.0..=2000.0, "km", "Width of the trench on the subducting plate in front of a subduction front.";

@@ -227,6 +227,7 @@ pub struct ReliefState {
     oceanic: Vec<bool>,
     continental: Vec<bool>,
     fill: Vec<f32>,
+    trench_scratch: TrenchScratch,
     /// Trench depth below the sea floor beside it, km per sample (0 away from fronts), as cut
     /// by the last isostasy pass. The summary reads it to leave trenches out of the normal
     /// floor's age–depth statistics. The fronts do not: they read the elevation at the front,
@@ -251,6 +252,7 @@ impl ReliefState {
         self.router.max_overflows = max_overflows;
         self.sea = SeaMaskScratch::default();
         self.fill = Vec::new();
+        self.trench_scratch = TrenchScratch::default();
     }
 
     /// Deflection w of the lithosphere under the continents' regional load (km, positive
@@ -852,9 +854,9 @@ fn to_front_km(field: &ConvergenceField, fp: &FrontPoints, oceanic: bool, i: usi
 /// the resampling then discards it: a sixth of the deposit on the default planet, a quarter
 /// with collisions in place (a resampling every 10 steps or more).
 ///
-/// Unlike the trench, a passage does not ask whether the sample lies beside the stretch of
-/// front its point stands for: oblique convergence carries floor sideways by hundreds of km
-/// before it is removed, and with that test three quarters of the loss remained.
+/// A passage does not ask whether the sample lies beside the stretch of front its point stands
+/// for: oblique convergence carries floor sideways by hundreds of km before it is removed, and
+/// with that test three quarters of the loss remained.
 fn subducted_passages(
     mesh: &SphereMesh,
     g: &ReliefGraph,
@@ -894,154 +896,199 @@ fn subducted_passages(
         });
 }
 
-/// The active front points of the step in the world frame, bucketed in a uniform grid over the
-/// cube around the unit sphere, to ask whether a subducting sample stands in front of a front its
-/// plate goes under, beside the stretch a point stands for: at most `width + spacing` behind the
-/// point (against its normal), at most `width + 2·spacing` ahead of it, and at most half its
-/// length plus two spacings to its side (a sample's front point comes from a graph search and can
-/// sit more than one spacing to the side).
-struct FrontReach {
-    /// Per point: world position, world normal, half its stretch with the slack (km), and the
-    /// subducting plate; `None` for an inactive point or one whose plate is gone.
-    points: Vec<Option<(glam::DVec3, glam::DVec3, f64, u32)>>,
-    /// The points of each cell (`start[c]..start[c + 1]` of `in_cell`), cells in x, y, z order.
-    start: Vec<u32>,
-    in_cell: Vec<u32>,
-    /// Cells along an axis, and their size in unit-sphere units: twice the farthest a sample
-    /// can stand from a point that accepts it, so a sample's ball meets at most two cells along
-    /// each axis.
-    cells: usize,
-    cell: f64,
-    r_km: f64,
-    behind_km: f64,
-    ahead_km: f64,
-}
-
-impl FrontReach {
-    fn new(
-        fp: &FrontPoints,
-        table: &PlateTable,
-        positions: &[glam::DVec3],
-        r_km: f64,
-        width_km: f64,
-        spacing_km: f64,
-    ) -> Self {
-        let (behind_km, ahead_km) = (width_km + spacing_km, width_km + 2.0 * spacing_km);
-        let points: Vec<_> = (0..fp.len())
-            .map(|k| {
-                if !fp.trench.get(k).copied().unwrap_or(false) {
-                    return None;
-                }
-                let o = table.get(fp.overriding[k])?;
-                let p = positions.get(fp.sample[k] as usize)?;
-                let half = 0.5 * f64::from(fp.length_km[k]) + 2.0 * spacing_km;
-                Some((
-                    o.world_from_plate * *p,
-                    o.world_from_plate * fp.normal[k],
-                    half,
-                    fp.subducting[k],
-                ))
-            })
-            .collect();
-        let half_max = points.iter().flatten().fold(0.0f64, |m, p| m.max(p.2));
-        let reach = behind_km.max(ahead_km).hypot(half_max) / r_km;
-        // At most 64 cells an axis (a coarser grid only lists more points a cell).
-        let cells = ((2.0 / (2.0 * reach)).floor() as usize).clamp(1, 64);
-        let cell = 2.0 / cells as f64;
-        let mut me = Self {
-            points,
-            start: vec![0; cells * cells * cells + 1],
-            in_cell: Vec::new(),
-            cells,
-            cell,
-            r_km,
-            behind_km,
-            ahead_km,
-        };
-        let keys: Vec<Option<usize>> = me
-            .points
-            .iter()
-            .map(|p| p.map(|p| me.cell_of(me.axis(p.0))))
-            .collect();
-        for &c in keys.iter().flatten() {
-            me.start[c + 1] += 1;
-        }
-        for c in 0..me.start.len() - 1 {
-            me.start[c + 1] += me.start[c];
-        }
-        let mut fill = me.start.clone();
-        me.in_cell = vec![0; *me.start.last().unwrap_or(&0) as usize];
-        for (k, c) in keys.iter().enumerate() {
-            if let Some(c) = *c {
-                me.in_cell[fill[c] as usize] = k as u32;
-                fill[c] += 1;
+/// The mesh vertex nearest `p` (unit), by a greedy walk over the mesh from `start`: on a
+/// Delaunay mesh the walk ends at the nearest vertex. Ties keep the vertex reached first.
+fn nearest_vertex_from(mesh: &SphereMesh, start: u32, p: glam::DVec3) -> u32 {
+    let pos = &mesh.positions;
+    let mut cur = start;
+    let mut best = pos[cur as usize].dot(p);
+    loop {
+        let mut next = cur;
+        for &j in mesh.neighbors_of(cur as usize) {
+            let d = pos[j as usize].dot(p);
+            if d > best {
+                best = d;
+                next = j;
             }
         }
-        me
-    }
-
-    /// Cell coordinates of `p` along each axis (clamped into the grid) and the fraction of the
-    /// cell where it lies.
-    fn axis(&self, p: glam::DVec3) -> [(usize, f64); 3] {
-        let f = |x: f64| {
-            let t = ((x + 1.0) / self.cell).clamp(0.0, self.cells as f64 - 1e-9);
-            (t.floor() as usize, t.fract())
-        };
-        [f(p.x), f(p.y), f(p.z)]
-    }
-
-    fn cell_of(&self, a: [(usize, f64); 3]) -> usize {
-        (a[0].0 * self.cells + a[1].0) * self.cells + a[2].0
-    }
-
-    /// Whether the sample of plate `plate` at world position `q` stands in front of point `k`
-    /// (active, of a front that plate goes under), beside its stretch.
-    #[inline]
-    fn beside(&self, q: glam::DVec3, plate: u32, k: usize) -> bool {
-        let Some(&Some((p, nrm, half, sub))) = self.points.get(k) else {
-            return false;
-        };
-        if sub != plate {
-            return false;
+        if next == cur {
+            return cur;
         }
-        let off = (q - p) * self.r_km;
-        let ahead = off.dot(nrm);
-        ahead >= -self.behind_km && ahead <= self.ahead_km && off.dot(nrm.cross(p)).abs() <= half
+        cur = next;
     }
+}
 
-    /// Whether the sample of plate `plate` at world position `q` stands in front of an active
-    /// point of a front that plate goes under, beside that point's stretch; its own front point
-    /// `own` is tried first.
-    fn faces(&self, q: glam::DVec3, plate: u32, own: usize) -> bool {
-        if self.beside(q, plate, own) {
-            return true;
+/// Work areas of [`trench_candidates`], kept between steps.
+#[derive(Default)]
+struct TrenchScratch {
+    /// Per sample: the front point whose neighbourhood it is in (`NONE` if none).
+    point: Vec<u32>,
+    /// Per mesh vertex: the search that last reached it.
+    stamp: Vec<u32>,
+    search: u32,
+    queue: Vec<(u32, u32)>,
+    sources: Vec<(glam::DVec3, u32)>,
+    order: Vec<(u32, u32, u32)>,
+    seeds: Vec<Option<(glam::DVec3, u32)>>,
+}
+
+/// Marks the samples that may lie in a trench: those of a subducting plate within `radius`
+/// (radians) of a point of a front its plate goes under where the plates converge faster than
+/// `min_speed` (km/My), all positions taken in the subducting plate's frame as it stands now.
+/// Breadth first over the mesh from every such point of one plate at once (the points by plate,
+/// then by sample); a sample keeps the point whose search reached it first (`scratch.point`).
+/// The points are placed in parallel, the searches run serially in that fixed order, so the
+/// marks are the same whatever the thread count.
+fn trench_candidates(
+    mesh: &SphereMesh,
+    table: &PlateTable,
+    fp: &FrontPoints,
+    plate: &[u32],
+    radius: f64,
+    min_speed: f64,
+    scratch: &mut TrenchScratch,
+) {
+    let n = mesh.len();
+    let sc = scratch;
+    sc.point.clear();
+    sc.point.resize(n, NONE);
+    sc.stamp.resize(n, 0);
+    sc.order.clear();
+    sc.order.extend((0..fp.len()).filter_map(|k| {
+        let fast = f64::from(fp.convergence_km_per_my.get(k).copied().unwrap_or(0.0)) > min_speed;
+        fast.then_some((fp.subducting[k], fp.sample[k], k as u32))
+    }));
+    sc.order.sort_unstable();
+    let pos = &mesh.positions;
+    // Each point in its subducting plate's frame, and the vertex nearest it there (located on
+    // their own: the walks' reads miss the cache, about 2 µs a point).
+    sc.seeds.clear();
+    sc.order
+        .par_iter()
+        .with_min_len(256)
+        .map(|&(sub, sample, k)| {
+            let (s, o) = (table.get(sub)?, table.get(fp.overriding[k as usize])?);
+            let p = s.plate_from_world * (o.world_from_plate * pos[sample as usize]);
+            let l = mesh.locate(p);
+            let start = mesh.triangles[l.triangle as usize][l.dominant_corner()];
+            Some((p, nearest_vertex_from(mesh, start, p)))
+        })
+        .collect_into_vec(&mut sc.seeds);
+    let cos_r = radius.cos();
+    let mut from = 0;
+    while from < sc.order.len() {
+        let sub = sc.order[from].0;
+        let to = from + sc.order[from..].partition_point(|&(p, _, _)| p == sub);
+        sc.search = sc.search.wrapping_add(1);
+        if sc.search == 0 {
+            sc.stamp.fill(0);
+            sc.search = 1;
         }
-        let a = self.axis(q);
-        // The cell of `q` and, along each axis, the neighbour on the side `q` lies nearer to.
-        let pick = |(c, t): (usize, f64)| {
-            let other = if t < 0.5 {
-                c.checked_sub(1)
-            } else {
-                Some(c + 1)
-            };
-            [Some(c), other.filter(|&o| o < self.cells)]
-        };
-        let (xs, ys, zs) = (pick(a[0]), pick(a[1]), pick(a[2]));
-        for x in xs.into_iter().flatten() {
-            for y in ys.into_iter().flatten() {
-                for z in zs.into_iter().flatten() {
-                    let c = (x * self.cells + y) * self.cells + z;
-                    let (from, to) = (self.start[c] as usize, self.start[c + 1] as usize);
-                    if self.in_cell[from..to]
-                        .iter()
-                        .any(|&k| self.beside(q, plate, k as usize))
-                    {
-                        return true;
+        let now = sc.search;
+        sc.queue.clear();
+        sc.sources.clear();
+        if table.get(sub).is_some() {
+            for (&(_, _, k), seed) in sc.order[from..to].iter().zip(&sc.seeds[from..to]) {
+                let Some((p, v)) = *seed else {
+                    continue;
+                };
+                sc.sources.push((p, k));
+                if sc.stamp[v as usize] != now {
+                    sc.stamp[v as usize] = now;
+                    sc.queue.push((v, (sc.sources.len() - 1) as u32));
+                }
+            }
+            let mut head = 0;
+            while head < sc.queue.len() {
+                let (j, src) = sc.queue[head];
+                head += 1;
+                let (c, k) = sc.sources[src as usize];
+                if plate[j as usize] == sub && sc.point[j as usize] == NONE {
+                    sc.point[j as usize] = k;
+                }
+                for &nb in mesh.neighbors_of(j as usize) {
+                    if sc.stamp[nb as usize] != now && pos[nb as usize].dot(c) >= cos_r {
+                        sc.stamp[nb as usize] = now;
+                        sc.queue.push((nb, src));
                     }
                 }
             }
         }
-        false
+        from = to;
+    }
+}
+
+/// Where a subducting sample stands against the plate that overrides it, measured along its path
+/// ([`TrenchPath::distance_rad`]).
+struct TrenchPath<'a> {
+    mesh: &'a SphereMesh,
+    /// Plate of each sample.
+    plate: &'a [u32],
+    /// The overriding plate, and the rotation from the world into its frame.
+    over: u32,
+    over_from_world: glam::DMat3,
+}
+
+impl TrenchPath<'_> {
+    /// The vertex nearest world point `p` in the overriding plate's frame (walking from `from`),
+    /// and whether the overriding plate covers `p` (that vertex is one of its samples).
+    fn probe(&self, p: glam::DVec3, from: u32) -> (u32, bool) {
+        let v = nearest_vertex_from(self.mesh, from, self.over_from_world * p);
+        (v, self.plate.get(v as usize) == Some(&self.over))
+    }
+
+    /// Signed distance (radians) from world point `q` to the edge of the overriding plate along
+    /// the great circle through `q` in the direction `dir` (unit, tangent at `q`: the floor's
+    /// motion relative to the overriding plate): positive while the floor has yet to reach the
+    /// edge, negative once it went under; `None` when the edge is not within `reach` either way
+    /// (the floor slides past the plate, moves away from it, or is far from or deep under it).
+    /// The edge is the plate's footprint: where the nearest sample, in its frame, turns its own
+    /// (the boundary between its samples and the rest lies halfway between them).
+    /// `start` is a mesh vertex near `q` in that frame, where the walks begin.
+    fn distance_rad(
+        &self,
+        q: glam::DVec3,
+        dir: glam::DVec3,
+        start: u32,
+        reach: f64,
+        tol: f64,
+    ) -> Option<f64> {
+        let at = |s: f64| q * s.cos() + dir * s.sin();
+        let (v0, in0) = self.probe(q, start);
+        // Forward while outside, backward (along the way it came) once under the plate.
+        let sign = if in0 { -1.0 } else { 1.0 };
+        let (v1, in1) = self.probe(at(sign * reach), v0);
+        if in1 == in0 {
+            return None;
+        }
+        let (mut lo, mut hi, mut vlo, mut vhi) = (0.0f64, reach, v0, v1);
+        while hi - lo > tol {
+            let mid = 0.5 * (lo + hi);
+            let (vm, im) = self.probe(at(sign * mid), vlo);
+            if im == in0 {
+                (lo, vlo) = (mid, vm);
+            } else {
+                (hi, vhi) = (mid, vm);
+            }
+        }
+        // Where the path crosses the bisector of the last two vertices (in the overriding
+        // plate's frame): p(s)·(a − b) = 0 for p(s) = q·cos s + d·sin s.
+        let (a, b) = (
+            self.mesh.positions[vlo as usize],
+            self.mesh.positions[vhi as usize],
+        );
+        let ab = a - b;
+        let (qq, dd) = (
+            self.over_from_world * q,
+            self.over_from_world * (dir * sign),
+        );
+        let (ca, cb) = (qq.dot(ab), dd.dot(ab));
+        let s = if cb.abs() > 1e-15 {
+            (-ca / cb).atan().clamp(lo, hi)
+        } else {
+            0.5 * (lo + hi)
+        };
+        Some(sign * s)
     }
 }
 
@@ -1078,7 +1125,6 @@ pub fn apply_isostasy(
     mut crust: ResMut<Crust>,
     mut state: ResMut<ReliefState>,
     fp: Res<FrontPoints>,
-    field: Res<ConvergenceField>,
     plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
     mut gpu: Option<ResMut<GpuContext>>,
 ) {
@@ -1139,55 +1185,72 @@ pub fn apply_isostasy(
             .iso
             .smooth_root(g, &host.thickness_km, &state.continental, &iso);
     }
-    // Trench depth per sample, from the current fronts: on the subducting crust that has come
-    // to the front (distance to it at the last resampling less the convergence since), and only
-    // where the sample now stands in front of an active point of a front its plate goes under,
-    // beside the stretch of front that point stands for ([`FrontReach`]). Around a plate a few
-    // samples wide, whose single front point is every subducting sample's nearest, the trench
-    // would otherwise close into a ring at the convergence's distance. Any point of the front
-    // will do, not only the sample's own: oblique convergence carries the floor sideways along
-    // the front by hundreds of km between resamplings, and tested against its own point alone
-    // most of a trench's samples stood beside another point's stretch (the trench came out a
-    // dotted line).
+    // Trench depth per sample, from where the floor now stands against the plate that overrides
+    // it ([`TrenchPath`]): the distance, along the floor's motion relative to that plate, to the
+    // edge of the plate's footprint (ahead of floor yet to go under, behind floor gone under),
+    // for the floor near a converging point of a front its plate goes under
+    // ([`trench_candidates`]). Cut where the distance at the last resampling less the
+    // convergence since put the floor, the trench lagged the floor as an interval aged and
+    // thinned into dashes (docs/relief.md). Floor that slides past a plate, on a small plate's
+    // flanks or along a front, never reaches the edge along its path and gets no trench, so a
+    // small plate is not ringed.
     state.trench_km.clear();
     state.trench_km.resize(n, 0.0);
-    if field.subducting_point.len() == n && !fp.is_empty() && host.plate.len() >= n {
+    if !fp.is_empty() && host.plate.len() >= n {
         let (depth, width) = (ip.trench_depth_km, ip.trench_width_km);
         let r_km = mesh.radius_km;
         let spacing = mesh.mean_spacing_rad() * r_km;
         let table = PlateTable::from_query(&plates);
-        let reach = FrontReach::new(&fp, &table, &mesh.positions, r_km, width, spacing);
         let positions = &mesh.positions;
         let plate = &host.plate;
+        let mesh: &SphereMesh = &mesh;
+        let (reach, tol) = ((width + spacing) / r_km, 0.5 * spacing / r_km);
+        let min_speed = params.subduction.min_convergence_mm_per_yr;
+        // The trench reaches a quarter spacing past its width along the path; the edge stands
+        // within about half a spacing of the nearest front point (an overriding sample at the
+        // boundary).
+        let radius = (width + spacing) / r_km;
+        trench_candidates(
+            mesh,
+            &table,
+            &fp,
+            plate,
+            radius,
+            min_speed,
+            &mut state.trench_scratch,
+        );
+        let near = &state.trench_scratch.point;
         state
             .trench_km
             .par_iter_mut()
             .enumerate()
-            .with_min_len(8192)
+            .with_min_len(4096)
             .for_each(|(i, t)| {
-                let oceanic = host.crust_type[i] == CrustType::Oceanic;
-                let Some(d) = to_front_km(&field, &fp, oceanic, i) else {
+                let k = near[i];
+                if k == NONE || host.crust_type[i] != CrustType::Oceanic {
+                    return;
+                }
+                let k = k as usize;
+                let (Some(s), Some(o)) = (table.get(plate[i]), table.get(fp.overriding[k])) else {
                     return;
                 };
-                // A front point is the overriding plate's sample at the boundary, which lies
-                // half a spacing ahead of it (right after a resampling the nearest subducting
-                // sample stands about a spacing from the point: measured from the point, its
-                // trench was 0.2 km deep at 100,000 samples).
-                let d = f64::from(d) - 0.5 * spacing;
-                let depth_here = trench_depth_on_mesh_km(d, depth, width, spacing);
-                if depth_here == 0.0 {
-                    return; // beyond the trench: no need to place the sample against a front
+                let q = s.world_from_plate * positions[i];
+                let v = s.motion.velocity_km_per_my(q, r_km) - o.motion.velocity_km_per_my(q, r_km);
+                let speed = v.length();
+                if !(speed > min_speed) {
+                    return;
                 }
-                let faces = match table.get(plate[i]) {
-                    Some(s) => reach.faces(
-                        s.world_from_plate * positions[i],
-                        plate[i],
-                        field.subducting_point[i] as usize,
-                    ),
-                    None => true,
+                let path = TrenchPath {
+                    mesh,
+                    plate,
+                    over: o.id,
+                    over_from_world: o.plate_from_world,
                 };
-                if faces {
-                    *t = depth_here as f32;
+                if let Some(d) = path.distance_rad(q, v / speed, fp.sample[k], reach, tol) {
+                    let depth_here = trench_depth_on_mesh_km(d * r_km, depth, width, spacing);
+                    if depth_here > 0.0 {
+                        *t = depth_here as f32;
+                    }
                 }
             });
     }
@@ -1248,4 +1311,101 @@ pub fn apply_isostasy(
         state.sea_level_km = s;
     }
     after_write(&crust, &mut gpu, FieldMask::ELEVATION, declared);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+
+    fn mesh() -> SphereMesh {
+        SphereMesh::fibonacci(20_000, 0.5, 3, 6370.0).expect("mesh")
+    }
+
+    #[test]
+    fn the_greedy_walk_finds_the_nearest_vertex() {
+        let m = mesh();
+        let mut rng = 12345u64;
+        let mut next = || {
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (rng >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for k in 0..200 {
+            let p = DVec3::new(next(), next(), next()).normalize();
+            let start = (k * 97 % m.len()) as u32;
+            let walked = nearest_vertex_from(&m, start, p);
+            let best = (0..m.len())
+                .max_by(|&a, &b| m.positions[a].dot(p).total_cmp(&m.positions[b].dot(p)))
+                .unwrap();
+            assert_eq!(
+                m.positions[walked as usize].dot(p),
+                m.positions[best].dot(p),
+                "point {k}: walked to {walked}, nearest is {best}"
+            );
+        }
+    }
+
+    /// Plate 0 (the overriding plate) holds the northern hemisphere, plate 1 the rest: floor
+    /// south of the equator moving north meets the edge at its latitude's distance (within a
+    /// spacing, the footprint's jagged edge), obliquely at that over the cosine; floor under
+    /// plate 0 measures back to the edge; floor moving along the edge or away has none.
+    #[test]
+    fn the_trench_distance_follows_the_floors_path_to_the_plates_edge() {
+        let m = mesh();
+        let plate: Vec<u32> = m.positions.iter().map(|p| u32::from(p.z <= 0.0)).collect();
+        let path = TrenchPath {
+            mesh: &m,
+            plate: &plate,
+            over: 0,
+            over_from_world: glam::DMat3::IDENTITY,
+        };
+        let r = m.radius_km;
+        let spacing = m.mean_spacing_rad() * r;
+        let (reach, tol) = ((80.0 + spacing) / r, 0.5 * spacing / r);
+        let at = |lon: f64, lat_km: f64| {
+            let (lon, lat) = (lon.to_radians(), lat_km / r);
+            DVec3::new(lat.cos() * lon.cos(), lat.cos() * lon.sin(), lat.sin())
+        };
+        let north = |q: DVec3| (DVec3::Z - q * q.z).normalize();
+        let east = |q: DVec3| DVec3::Z.cross(q).normalize();
+        let start = |q: DVec3| nearest_vertex_from(&m, 0, q);
+        for lon in (0..360).step_by(15) {
+            let lon = lon as f64;
+            for lat_km in [-100.0, -60.0, -30.0, 30.0, 60.0] {
+                let q = at(lon, lat_km);
+                let d = path
+                    .distance_rad(q, north(q), start(q), reach, tol)
+                    .map(|d| d * r)
+                    .unwrap_or_else(|| panic!("no edge from latitude {lat_km} km at {lon}°"));
+                assert!(
+                    (d + lat_km).abs() < spacing,
+                    "at {lon}°, {lat_km} km: {d:.1} km to the edge"
+                );
+                // 40° off north, the path to the edge is longer by 1/cos 40°.
+                let dir = (north(q) * 40f64.to_radians().cos()
+                    + east(q) * 40f64.to_radians().sin())
+                .normalize();
+                if let Some(d2) = path.distance_rad(q, dir, start(q), reach, tol) {
+                    let want = -lat_km / 40f64.to_radians().cos();
+                    assert!(
+                        (d2 * r - want).abs() < 1.5 * spacing,
+                        "at {lon}°, {lat_km} km, oblique: {:.1} km, want {want:.1}",
+                        d2 * r
+                    );
+                } else {
+                    assert!(
+                        lat_km.abs() > 60.0,
+                        "no oblique edge from {lat_km} km at {lon}°"
+                    );
+                }
+            }
+            // Moving away from the plate, or along its edge three spacings off it: no trench.
+            let q = at(lon, -30.0);
+            assert_eq!(path.distance_rad(q, -north(q), start(q), reach, tol), None);
+            let q = at(lon, -3.0 * spacing);
+            assert_eq!(path.distance_rad(q, east(q), start(q), reach, tol), None);
+        }
+    }
 }

@@ -206,6 +206,37 @@ impl SphereMesh {
         self.locator.locate(&self.positions, &self.triangles, q)
     }
 
+    /// The vertex nearest unit vector `p`, by a greedy walk over the mesh from vertex `start`
+    /// (each hop to the neighbour nearest `p`, while one is nearer than the vertex): on a
+    /// Delaunay mesh the walk ends at the nearest vertex. Ties keep the vertex reached first.
+    /// Cheap when `start` is near `p`; [`Self::nearest_vertex`] starts from the locator.
+    pub fn nearest_vertex_from(&self, start: u32, p: DVec3) -> u32 {
+        let pos = &self.positions;
+        let mut cur = start;
+        let mut best = pos[cur as usize].dot(p);
+        loop {
+            let mut next = cur;
+            for &j in self.neighbors_of(cur as usize) {
+                let d = pos[j as usize].dot(p);
+                if d > best {
+                    best = d;
+                    next = j;
+                }
+            }
+            if next == cur {
+                return cur;
+            }
+            cur = next;
+        }
+    }
+
+    /// The vertex nearest unit vector `p`: the walk of [`Self::nearest_vertex_from`] from the
+    /// dominant corner of the triangle the locator finds under `p`.
+    pub fn nearest_vertex(&self, p: DVec3) -> u32 {
+        let l = self.locate(p);
+        self.nearest_vertex_from(self.triangles[l.triangle as usize][l.dominant_corner()], p)
+    }
+
     /// The point locator (grid cells over the triangles).
     pub fn locator(&self) -> &MeshLocator {
         &self.locator
@@ -249,6 +280,32 @@ impl SphereMesh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_greedy_walk_finds_the_nearest_vertex() {
+        let m = SphereMesh::fibonacci(20_000, 0.5, 3, 6370.0).expect("mesh");
+        let mut rng = 12345u64;
+        let mut next = || {
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (rng >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for k in 0..200 {
+            let p = DVec3::new(next(), next(), next()).normalize();
+            let start = (k * 97 % m.len()) as u32;
+            let best = (0..m.len())
+                .max_by(|&a, &b| m.positions[a].dot(p).total_cmp(&m.positions[b].dot(p)))
+                .unwrap();
+            for walked in [m.nearest_vertex_from(start, p), m.nearest_vertex(p)] {
+                assert_eq!(
+                    m.positions[walked as usize].dot(p),
+                    m.positions[best].dot(p),
+                    "point {k}: walked to {walked}, nearest is {best}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn orientation_and_euler_characteristic_at_several_sizes() {

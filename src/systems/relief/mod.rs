@@ -896,28 +896,6 @@ fn subducted_passages(
         });
 }
 
-/// The mesh vertex nearest `p` (unit), by a greedy walk over the mesh from `start`: on a
-/// Delaunay mesh the walk ends at the nearest vertex. Ties keep the vertex reached first.
-fn nearest_vertex_from(mesh: &SphereMesh, start: u32, p: glam::DVec3) -> u32 {
-    let pos = &mesh.positions;
-    let mut cur = start;
-    let mut best = pos[cur as usize].dot(p);
-    loop {
-        let mut next = cur;
-        for &j in mesh.neighbors_of(cur as usize) {
-            let d = pos[j as usize].dot(p);
-            if d > best {
-                best = d;
-                next = j;
-            }
-        }
-        if next == cur {
-            return cur;
-        }
-        cur = next;
-    }
-}
-
 /// Work areas of [`trench_candidates`], kept between steps.
 #[derive(Default)]
 struct TrenchScratch {
@@ -969,9 +947,7 @@ fn trench_candidates(
         .map(|&(sub, sample, k)| {
             let (s, o) = (table.get(sub)?, table.get(fp.overriding[k as usize])?);
             let p = s.plate_from_world * (o.world_from_plate * pos[sample as usize]);
-            let l = mesh.locate(p);
-            let start = mesh.triangles[l.triangle as usize][l.dominant_corner()];
-            Some((p, nearest_vertex_from(mesh, start, p)))
+            Some((p, mesh.nearest_vertex(p)))
         })
         .collect_into_vec(&mut sc.seeds);
     let cos_r = radius.cos();
@@ -1030,10 +1006,13 @@ struct TrenchPath<'a> {
 }
 
 impl TrenchPath<'_> {
-    /// The vertex nearest world point `p` in the overriding plate's frame (walking from `from`),
-    /// and whether the overriding plate covers `p` (that vertex is one of its samples).
+    /// The vertex nearest world point `p` in the overriding plate's frame (walking from `from`,
+    /// [`SphereMesh::nearest_vertex_from`]), and whether the overriding plate covers `p` (that
+    /// vertex is one of its samples).
     fn probe(&self, p: glam::DVec3, from: u32) -> (u32, bool) {
-        let v = nearest_vertex_from(self.mesh, from, self.over_from_world * p);
+        let v = self
+            .mesh
+            .nearest_vertex_from(from, self.over_from_world * p);
         (v, self.plate.get(v as usize) == Some(&self.over))
     }
 
@@ -1322,31 +1301,6 @@ mod tests {
         SphereMesh::fibonacci(20_000, 0.5, 3, 6370.0).expect("mesh")
     }
 
-    #[test]
-    fn the_greedy_walk_finds_the_nearest_vertex() {
-        let m = mesh();
-        let mut rng = 12345u64;
-        let mut next = || {
-            rng = rng
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (rng >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
-        for k in 0..200 {
-            let p = DVec3::new(next(), next(), next()).normalize();
-            let start = (k * 97 % m.len()) as u32;
-            let walked = nearest_vertex_from(&m, start, p);
-            let best = (0..m.len())
-                .max_by(|&a, &b| m.positions[a].dot(p).total_cmp(&m.positions[b].dot(p)))
-                .unwrap();
-            assert_eq!(
-                m.positions[walked as usize].dot(p),
-                m.positions[best].dot(p),
-                "point {k}: walked to {walked}, nearest is {best}"
-            );
-        }
-    }
-
     /// Plate 0 (the overriding plate) holds the northern hemisphere, plate 1 the rest: floor
     /// south of the equator moving north meets the edge at its latitude's distance (within a
     /// spacing, the footprint's jagged edge), obliquely at that over the cosine; floor under
@@ -1370,7 +1324,7 @@ mod tests {
         };
         let north = |q: DVec3| (DVec3::Z - q * q.z).normalize();
         let east = |q: DVec3| DVec3::Z.cross(q).normalize();
-        let start = |q: DVec3| nearest_vertex_from(&m, 0, q);
+        let start = |q: DVec3| m.nearest_vertex(q);
         for lon in (0..360).step_by(15) {
             let lon = lon as f64;
             for lat_km in [-100.0, -60.0, -30.0, 30.0, 60.0] {

@@ -904,10 +904,12 @@ struct TrenchScratch {
     /// Per mesh vertex: the search that last reached it.
     stamp: Vec<u32>,
     search: u32,
-    queue: Vec<(u32, u32)>,
-    sources: Vec<(glam::DVec3, u32)>,
+    /// The converging points: (subducting plate, sample, point), sorted.
     order: Vec<(u32, u32, u32)>,
+    /// Per entry of `order`: the point in its subducting plate's frame and the vertex nearest
+    /// it there (`None` when a plate is gone).
     seeds: Vec<Option<(glam::DVec3, u32)>>,
+    queue: Vec<(u32, u32)>,
 }
 
 /// Marks the samples that may lie in a trench: those of a subducting plate within `radius`
@@ -961,32 +963,32 @@ fn trench_candidates(
             sc.search = 1;
         }
         let now = sc.search;
+        // The queue holds (vertex, the index in `order` of the point whose search reached it).
         sc.queue.clear();
-        sc.sources.clear();
-        if table.get(sub).is_some() {
-            for (&(_, _, k), seed) in sc.order[from..to].iter().zip(&sc.seeds[from..to]) {
-                let Some((p, v)) = *seed else {
-                    continue;
-                };
-                sc.sources.push((p, k));
-                if sc.stamp[v as usize] != now {
-                    sc.stamp[v as usize] = now;
-                    sc.queue.push((v, (sc.sources.len() - 1) as u32));
-                }
+        for idx in from..to {
+            if let Some((_, v)) = sc.seeds[idx]
+                && sc.stamp[v as usize] != now
+            {
+                sc.stamp[v as usize] = now;
+                sc.queue.push((v, idx as u32));
             }
-            let mut head = 0;
-            while head < sc.queue.len() {
-                let (j, src) = sc.queue[head];
-                head += 1;
-                let (c, k) = sc.sources[src as usize];
-                if plate[j as usize] == sub && sc.point[j as usize] == NONE {
-                    sc.point[j as usize] = k;
-                }
-                for &nb in mesh.neighbors_of(j as usize) {
-                    if sc.stamp[nb as usize] != now && pos[nb as usize].dot(c) >= cos_r {
-                        sc.stamp[nb as usize] = now;
-                        sc.queue.push((nb, src));
-                    }
+        }
+        let mut head = 0;
+        while head < sc.queue.len() {
+            let (j, src) = sc.queue[head];
+            head += 1;
+            // Only points with a seed are queued.
+            let Some((c, _)) = sc.seeds[src as usize] else {
+                continue;
+            };
+            let k = sc.order[src as usize].2;
+            if plate[j as usize] == sub && sc.point[j as usize] == NONE {
+                sc.point[j as usize] = k;
+            }
+            for &nb in mesh.neighbors_of(j as usize) {
+                if sc.stamp[nb as usize] != now && pos[nb as usize].dot(c) >= cos_r {
+                    sc.stamp[nb as usize] = now;
+                    sc.queue.push((nb, src));
                 }
             }
         }

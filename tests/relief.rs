@@ -2372,3 +2372,106 @@ fn a_long_chain_of_full_basins_ends_in_the_sea() {
     let b = route_over_pitted_plain(plain, 78, 0.01, Some(16));
     assert!(b.to_ocean_km3 > 0.0, "nothing reached the sea");
 }
+
+/// A sea (within 1,500 km of +x, 3 km deep), a plain beyond it out to 3,000 km that falls
+/// seawards at 10⁻⁵ (1 m above the sea at the coast), and a ramp of 2·10⁻³ beyond, which sheds
+/// 10 m of rock. Rivers cross the plain, far flatter than their graded slope: each plain sample
+/// on a river keeps what raises it to its graded slope above its receiver as it stood (above the
+/// sea at half the edge at the coast), never more, and the rest goes on to the sea; the ramp,
+/// steeper than grade but at its foot, keeps nothing; the volume is kept and the plains' part is counted. With
+/// the graded slope at 0, nothing settles on land. Seen to fail with twice the room kept (plain
+/// samples stood above their graded level).
+#[test]
+fn rivers_build_their_plains_to_the_graded_slope() {
+    let (mesh, g) = mesh_graph(20_000);
+    let n = g.len();
+    let (sea_km, plain_km) = (1500.0, 3000.0);
+    let h: Vec<f32> = mesh
+        .positions
+        .iter()
+        .map(|&q| {
+            let d = dist_from_x(q);
+            if d < sea_km {
+                -3.0
+            } else if d < plain_km {
+                (0.001 + 1e-5 * (d - sea_km)) as f32
+            } else {
+                (0.001 + 1e-5 * (plain_km - sea_km) + 2e-3 * (d - plain_km)) as f32
+            }
+        })
+        .collect();
+    let ocean: Vec<bool> = h.iter().map(|&z| z < 0.0).collect();
+    let plain: Vec<bool> = (0..n)
+        .map(|i| !ocean[i] && dist_from_x(mesh.positions[i]) < plain_km)
+        .collect();
+    let mut d = Drainage::new();
+    d.compute(g, &h, &ocean, None);
+    assert!(d.sinks.is_empty(), "the land should drain to the sea");
+    let eroded: Vec<f32> = (0..n)
+        .map(|i| if ocean[i] || plain[i] { 0.0 } else { 0.01 })
+        .collect();
+    let input: f64 = (0..n).map(|i| eroded[i] as f64 * g.area_km2[i]).sum();
+    let route = |p: &SedimentParams| {
+        let mut dep = vec![0.0f32; n];
+        let b = SedimentRouter::new().route(g, &d, &h, &eroded, None, None, p, &mut dep);
+        assert!(b.relative_error() < 1e-6, "router budget {b:?}");
+        (dep, b)
+    };
+    let p = SedimentParams {
+        graded_slope: 0.001,
+        ..SedimentParams::default()
+    };
+    let (dep, b) = route(&p);
+    let (mut graded, mut at_target, mut on_land) = (0, 0, 0.0);
+    for i in 0..n {
+        if ocean[i] || dep[i] <= 0.0 {
+            continue;
+        }
+        on_land += dep[i] as f64 * g.area_km2[i];
+        assert!(
+            dist_from_x(mesh.positions[i]) < plain_km + 300.0,
+            "sample {i} high on the ramp kept {} km",
+            dep[i]
+        );
+        let r = d.receiver[i] as usize;
+        let run = d.receiver_km[i] as f64;
+        let (base, run) = if ocean[r] {
+            (0.0, 0.5 * run)
+        } else {
+            (h[r] as f64, run)
+        };
+        let target = base + p.graded_slope_at(d.area_km2[i]) * run;
+        let top = h[i] as f64 + dep[i] as f64;
+        assert!(
+            top <= target + 1e-6,
+            "sample {i} stands at {top} km, above its graded level {target} km"
+        );
+        graded += 1;
+        if (top - target).abs() <= 1e-6 {
+            at_target += 1;
+        }
+    }
+    assert!(
+        graded >= 10 && at_target >= 10,
+        "{graded} plain samples kept sediment, {at_target} of them up to grade"
+    );
+    assert!(
+        (on_land - b.plains_km3).abs() <= 1e-6 * input,
+        "plains {} km³ against {on_land} km³ laid on land",
+        b.plains_km3
+    );
+    assert!(
+        on_land < 0.9 * input,
+        "the plain kept {on_land} of {input} km³"
+    );
+    let off = SedimentParams {
+        graded_slope: 0.0,
+        ..p
+    };
+    let (dep0, b0) = route(&off);
+    assert!(
+        (0..n).all(|i| ocean[i] || dep0[i] == 0.0),
+        "with no graded slope the land kept sediment"
+    );
+    assert_eq!(b0.plains_km3, 0.0);
+}

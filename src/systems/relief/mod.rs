@@ -131,6 +131,8 @@ pub fn sediment_params(params: &Params) -> SedimentParams {
         slope_gradient: s.slope_gradient,
         slope_base_depth_km: s.slope_base_depth_km,
         rise_gradient: s.rise_gradient,
+        graded_slope: s.graded_slope,
+        graded_concavity: s.graded_concavity,
         ..SedimentParams::default()
     }
 }
@@ -798,40 +800,88 @@ pub fn deposit_sediment(
         .with_min_len(8192)
         .for_each(|(t, &d)| *t += d);
     flux.total_deposited_km3 += flux.sediment.deposited_km3;
-    // Pelagic rain (plankton shells, dust): sea floor younger than the age cap gains
-    // `sediment.pelagic_rate_m_per_my`; it comes from the sea, not the land, so it is counted
-    // apart from the eroded-deposited balance.
-    let rate_km = params.sediment.pelagic_rate_m_per_my * 1e-3 * relief_dt_my(&params);
-    let max_age = params.sediment.pelagic_max_age_my as f32;
-    if rate_km > 0.0 {
-        let ocean = &network.drainage.ocean;
-        let (oceanic, age) = (&state.oceanic, &crust.age_my);
-        let rains = |i: usize| oceanic[i] && ocean[i] && age[i] < max_age;
-        // One pass: each fixed chunk adds its rain and sums its volume, the chunks are summed in
-        // order (the same sum whatever the thread count).
+    // Pelagic rain (plankton shells, dust); it comes from the sea, not the land, so it is
+    // counted apart from the eroded-deposited balance.
+    let rain = PelagicRain {
+        layer_km: params.sediment.pelagic_rate_m_per_my * 1e-3 * relief_dt_my(&params),
+        max_age_my: params.sediment.pelagic_max_age_my as f32,
+        min_depth_km: params.sediment.pelagic_min_depth_m * 1e-3,
+    };
+    let Crust {
+        thickness_km,
+        elevation_km,
+        age_my,
+        ..
+    } = crust;
+    flux.pelagic_km3 = rain.lay(
+        thickness_km,
+        elevation_km,
+        age_my,
+        &state.oceanic,
+        &network.drainage.ocean,
+        &g.area_km2,
+    );
+    after_write(&crust_res, &mut gpu, FieldMask::THICKNESS, declared);
+}
+
+/// Pelagic rain (plankton shells, dust) over one step: a layer `layer_km` thick on every
+/// sample of oceanic crust at sea ([`Drainage::ocean`](drainage::Drainage::ocean)) younger than
+/// `max_age_my` (older floor lies below the carbonate compensation depth, where little settles)
+/// and deeper than `min_depth_km` (above the wave base the waves keep the fine rain in suspension
+/// and carry it off: floor filled to sea level would otherwise be raised while at sea and
+/// lowered by its age once dry, and flicker across sea level step after step).
+#[derive(Clone, Copy, Debug)]
+pub struct PelagicRain {
+    /// Thickness laid per step, km.
+    pub layer_km: f64,
+    /// Oldest floor that gets it, My.
+    pub max_age_my: f32,
+    /// Shallowest water that gets it, km (positive).
+    pub min_depth_km: f64,
+}
+
+impl PelagicRain {
+    /// Adds the layer to `thickness_km` where it settles (see [`PelagicRain`]) and returns its
+    /// volume, km³. One pass: each fixed chunk adds its rain and sums its volume, the chunks are
+    /// summed in order (the same sum whatever the thread count).
+    pub fn lay(
+        &self,
+        thickness_km: &mut [f32],
+        elevation_km: &[f32],
+        age_my: &[f32],
+        oceanic: &[bool],
+        ocean: &[bool],
+        area_km2: &[f64],
+    ) -> f64 {
+        if !(self.layer_km > 0.0) {
+            return 0.0;
+        }
+        let top = -self.min_depth_km;
+        let settles = |i: usize| {
+            oceanic.get(i).copied().unwrap_or(false)
+                && ocean.get(i).copied().unwrap_or(false)
+                && age_my.get(i).is_some_and(|&a| a < self.max_age_my)
+                && elevation_km.get(i).is_some_and(|&z| f64::from(z) < top)
+        };
         const CH: usize = 8192;
-        flux.pelagic_km3 = crust
-            .thickness_km
+        thickness_km
             .par_chunks_mut(CH)
             .enumerate()
             .map(|(c, ts)| {
                 let mut sum = 0.0f64;
                 for (k, t) in ts.iter_mut().enumerate() {
                     let i = c * CH + k;
-                    if rains(i) {
-                        *t += rate_km as f32;
-                        sum += rate_km * g.area_km2[i];
+                    if settles(i) {
+                        *t += self.layer_km as f32;
+                        sum += self.layer_km * area_km2.get(i).copied().unwrap_or(0.0);
                     }
                 }
                 sum
             })
             .collect::<Vec<f64>>()
             .iter()
-            .sum();
-    } else {
-        flux.pelagic_km3 = 0.0;
+            .sum()
     }
-    after_write(&crust_res, &mut gpu, FieldMask::THICKNESS, declared);
 }
 
 /// Sample `i`'s distance to its subduction front at the last resampling less the convergence
@@ -1301,6 +1351,30 @@ mod tests {
 
     fn mesh() -> SphereMesh {
         SphereMesh::fibonacci(20_000, 0.5, 3, 6370.0).expect("mesh")
+    }
+
+    /// Pelagic rain settles on oceanic crust at sea, young enough, and below the wave base only:
+    /// five samples, each failing one condition but the first and the last. Seen to fail with
+    /// the depth condition left out (the shallow sample got its layer).
+    #[test]
+    fn pelagic_rain_settles_below_the_wave_base_only() {
+        let rain = PelagicRain {
+            layer_km: 0.028,
+            max_age_my: 300.0,
+            min_depth_km: 0.05,
+        };
+        // deep and young; shallow (20 m); old; continental crust; a lake (not the sea); deep again
+        let elevation = [-4.0f32, -0.02, -5.0, -0.5, -0.3, -0.051];
+        let age = [50.0f32, 50.0, 400.0, 50.0, 50.0, 10.0];
+        let oceanic = [true, true, true, false, true, true];
+        let ocean = [true, true, true, true, false, true];
+        let area = [100.0; 6];
+        let mut thickness = [7.0f32; 6];
+        let v = rain.lay(&mut thickness, &elevation, &age, &oceanic, &ocean, &area);
+        let got: Vec<bool> = thickness.iter().map(|&t| t > 7.0).collect();
+        assert_eq!(got, [true, false, false, false, false, true]);
+        assert!((v - 2.0 * 0.028 * 100.0).abs() < 1e-9, "volume {v}");
+        assert!((thickness[0] - 7.028).abs() < 1e-6);
     }
 
     /// Plate 0 (the overriding plate) holds the northern hemisphere, plate 1 the rest: floor

@@ -67,6 +67,13 @@ pub struct SedimentParams {
     /// least half as steep as the steepest (fans); `false`: steepest neighbour only (cheaper:
     /// about half the visits).
     pub marine_mfd: bool,
+    /// Graded slope of a river draining 1,000 km², m/m: a land sample flatter than its graded
+    /// slope above its receiver keeps what its river carries until it stands at that slope
+    /// (0: rivers lay nothing down outside lakes).
+    pub graded_slope: f64,
+    /// Exponent θ of the graded slope's fall with drainage area A:
+    /// S = graded_slope·(A / 1,000 km²)^(−θ).
+    pub graded_concavity: f64,
     /// A flux that would make a layer thinner than this over the sample it reaches (km) is
     /// deposited there instead of being passed on (5 m per step: pelagic rates are 1–10 m/My).
     pub min_pass_thickness_km: f64,
@@ -84,11 +91,18 @@ impl Default for SedimentParams {
             rise_gradient: 0.0087,
             min_pass_thickness_km: 5e-3,
             marine_mfd: true,
+            graded_slope: 0.0,
+            graded_concavity: 0.45,
         }
     }
 }
 
 impl SedimentParams {
+    /// Graded slope (m/m) of a river draining `area_km2` (see [`Self::graded_slope`]).
+    pub fn graded_slope_at(&self, area_km2: f64) -> f64 {
+        self.graded_slope * (area_km2.max(1.0) / 1000.0).powf(-self.graded_concavity)
+    }
+
     /// Shelf-top elevation (km, negative) at along-path distance `d_km` from the coast:
     /// −(z_coast + g_shelf·D) down to the break depth, then deepening at the outer gradient.
     pub fn shelf_top_km(&self, d_km: f64) -> f64 {
@@ -112,6 +126,8 @@ pub struct SedimentBudget {
     pub deposited_km3: f64,
     /// Part kept in lakes and endorheic sinks.
     pub lakes_km3: f64,
+    /// Part laid on river plains graded to their slope ([`SedimentParams::graded_slope`]).
+    pub plains_km3: f64,
     /// Part that reached the ocean.
     pub to_ocean_km3: f64,
     /// Part spread around local minima of the sea floor (excess after filling them).
@@ -562,6 +578,27 @@ impl SedimentRouter {
                 let wl = drainage.water_level_km[i] as f64;
                 self.queue_lake(low, wl, q, from, r);
                 continue;
+            }
+            // A river on ground flatter than its graded slope lays down what raises the ground
+            // to that slope above its receiver (or above the sea at its mouth): alluvial
+            // plains and delta tops, built from the sea up as the ground subsides.
+            let mut q = q;
+            if p.graded_slope > 0.0 && q > 0.0 {
+                let d = drainage.receiver_km[i] as f64;
+                let (base, run) = if ocean[r] {
+                    (0.0, 0.5 * d)
+                } else {
+                    (surface_km(g, elevation_km, &ff, &self.dep, r), d)
+                };
+                let target = base + p.graded_slope_at(drainage.area_km2[i]) * run;
+                let zi = surface_km(g, elevation_km, &ff, &self.dep, i);
+                if target > zi {
+                    let keep = q.min((target - zi) * g.area_km2[i] / ff(i));
+                    self.touch_deposit(i, true);
+                    self.dep[i] += keep;
+                    b.plains_km3 += keep;
+                    q -= keep;
+                }
             }
             if q <= 0.0 {
                 continue;

@@ -423,6 +423,63 @@ fn same_seed_same_bits_with_one_thread_or_two() {
     );
 }
 
+/// The isostasy's trench runs on a thread of its own beside the sediment, on copies of the crust
+/// taken before it; a plugin that changes crust types after that (here every 40th oceanic sample
+/// turns continental between the sediment and the isostasy) must not leave the trench of the
+/// crust before: with one worker thread the isostasy computes the trench itself, with two it
+/// takes the thread's only if what it read still holds: the same bits and trench depths. Seen to
+/// fail with the crust-type check left out of that test (`take_trench`): the flipped samples
+/// kept the trench they had as ocean floor.
+#[test]
+fn a_crust_changed_beside_the_trench_thread_is_not_missed() {
+    use tectonic_planets::resources::{Crust, CrustType};
+    struct Flip;
+    impl Plugin for Flip {
+        fn build(&self, app: &mut App) {
+            app.add_systems(
+                TectonicStep,
+                (|mut crust: ResMut<Crust>| {
+                    let crust = &mut *crust;
+                    let mut k = 0;
+                    for t in crust.crust_type.iter_mut() {
+                        if *t == CrustType::Oceanic {
+                            k += 1;
+                            if k % 40 == 0 {
+                                *t = CrustType::Continental;
+                            }
+                        }
+                    }
+                })
+                .after(TectonicSystems::Sediment)
+                .before(TectonicSystems::Isostasy),
+            );
+        }
+    }
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let plugins = TectonicPlugins.build().add(Flip);
+            let mut sim = Simulation::with_plugins(params(40_000, 21), plugins).unwrap();
+            sim.run_steps(6).unwrap();
+            let trench = sim
+                .world()
+                .resource::<tectonic_planets::systems::relief::ReliefState>()
+                .trench_km
+                .clone();
+            let cut = trench.iter().filter(|&&d| d > 0.0).count();
+            (sim.state_hash(), sim.crust().hash(), trench, cut)
+        })
+    };
+    let (one, two) = (run(1), run(2));
+    assert!(one.3 > 100, "only {} trench samples", one.3);
+    let differ = one.2.iter().zip(&two.2).filter(|(a, b)| a != b).count();
+    assert_eq!(differ, 0, "trench depths differ on {differ} samples");
+    assert_eq!((one.0, one.1), (two.0, two.1));
+}
+
 /// Area-weighted share of a 720×360 map on which planets `a` and `b` have the same plate, and
 /// the same crust type.
 fn map_agreement(a: &Simulation, b: &Simulation) -> (f64, f64) {

@@ -2,6 +2,8 @@
 //! adjacency, per-sample areas and the point locator. Built once per run; plates are subsets of
 //! it in their own frames, and resampling maps data back onto it.
 
+use std::sync::Arc;
+
 use bevy_ecs::resource::Resource;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -27,9 +29,15 @@ pub enum MeshError {
     Triangulation(String),
 }
 
-/// The reference mesh (a resource). Positions are unit vectors; areas are in km².
+/// The reference mesh (a resource). Positions are unit vectors; areas are in km². Its data
+/// ([`MeshData`], read through `Deref`) sits behind an `Arc`: a clone is cheap and shares it,
+/// so work handed to a task off the schedule (the isostasy's trench) can read the mesh.
 #[derive(Resource, Clone, Debug)]
-pub struct SphereMesh {
+pub struct SphereMesh(Arc<MeshData>);
+
+/// What a [`SphereMesh`] holds.
+#[derive(Clone, Debug)]
+pub struct MeshData {
     /// Unit position of each sample.
     pub positions: Vec<DVec3>,
     /// Triangles as sample indices, counter-clockwise seen from outside.
@@ -45,6 +53,15 @@ pub struct SphereMesh {
     /// Longest triangle edge, radians.
     pub max_edge_rad: f64,
     locator: MeshLocator,
+}
+
+impl std::ops::Deref for SphereMesh {
+    type Target = MeshData;
+
+    #[inline]
+    fn deref(&self) -> &MeshData {
+        &self.0
+    }
 }
 
 impl SphereMesh {
@@ -147,7 +164,7 @@ impl SphereMesh {
         let locator = MeshLocator::build(&positions, &triangles);
         tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "locator");
         let t = std::time::Instant::now();
-        let mesh = Self {
+        let mesh = Self(Arc::new(MeshData {
             positions,
             triangles,
             neighbor_start,
@@ -156,10 +173,15 @@ impl SphereMesh {
             radius_km,
             max_edge_rad,
             locator,
-        };
+        }));
         mesh.check_topology()?;
         tracing::debug!(ms = t.elapsed().as_secs_f64() * 1e3, "topology check");
         Ok(mesh)
+    }
+
+    /// The mesh's data, taken out of it (copied if another clone still shares it).
+    pub fn into_data(self) -> MeshData {
+        Arc::try_unwrap(self.0).unwrap_or_else(|shared| (*shared).clone())
     }
 
     /// Number of samples.

@@ -47,6 +47,18 @@ impl Plugin for IsostasyPlugin {
                 .in_set(TectonicSystems::Isostasy)
                 .run_if(phenomenon_enabled(ISOSTASY)),
         );
+        // The trench's geometry reads nothing the surface processes write: it runs on a
+        // thread of the pool beside the sediment's routing (one thread's work, as the router
+        // is; started before the rivers, it took their parallel loops' second thread), and the
+        // isostasy takes it.
+        app.add_systems(
+            TectonicStep,
+            relief::begin_trench
+                .after(TectonicSystems::Coasts)
+                .before(TectonicSystems::Sediment)
+                .run_if(phenomenon_enabled(ISOSTASY))
+                .run_if(relief::relief_due),
+        );
         // A resampling interpolates the elevation, trenches included, from where the samples
         // were: the trench of floor gone under the overriding plate is lost and what is left shows
         // as lenses. The elevation is derived again on the new crust, with the fronts rebuilt.

@@ -722,6 +722,7 @@ impl CoarseLevel {
         } else {
             0.0
         };
+        let cm = cm.into_data();
         let mut level = Self {
             sigma_km,
             n_fine: n,

@@ -230,6 +230,11 @@ pub struct ReliefState {
     continental: Vec<bool>,
     fill: Vec<f32>,
     trench_scratch: TrenchScratch,
+    /// The trench running beside the surface processes ([`begin_trench`]).
+    trench_task: Option<TrenchTask>,
+    /// The task's copies of each sample's plate and crust type (kept for the next step's).
+    trench_plate: Vec<u32>,
+    trench_types: Vec<CrustType>,
     /// Trench depth below the sea floor beside it, km per sample (0 away from fronts), as cut
     /// by the last isostasy pass. The summary reads it to leave trenches out of the normal
     /// floor's age–depth statistics. The fronts do not: they read the elevation at the front,
@@ -254,7 +259,11 @@ impl ReliefState {
         self.router.max_overflows = max_overflows;
         self.sea = SeaMaskScratch::default();
         self.fill = Vec::new();
-        self.trench_scratch = TrenchScratch::default();
+        if self.trench_task.is_none() {
+            self.trench_scratch = TrenchScratch::default();
+            self.trench_plate = Vec::new();
+            self.trench_types = Vec::new();
+        }
     }
 
     /// Deflection w of the lithosphere under the continents' regional load (km, positive
@@ -967,8 +976,9 @@ struct TrenchScratch {
 /// `min_speed` (km/My), all positions taken in the subducting plate's frame as it stands now.
 /// Breadth first over the mesh from every such point of one plate at once (the points by plate,
 /// then by sample); a sample keeps the point whose search reached it first (`scratch.point`).
-/// The points are placed in parallel, the searches run serially in that fixed order, so the
-/// marks are the same whatever the thread count.
+/// The points are placed in parallel (one after the other with `serial`), the searches run
+/// serially in that fixed order, so the marks are the same whatever the thread count.
+#[allow(clippy::too_many_arguments)]
 fn trench_candidates(
     mesh: &SphereMesh,
     table: &PlateTable,
@@ -976,6 +986,7 @@ fn trench_candidates(
     plate: &[u32],
     radius: f64,
     min_speed: f64,
+    serial: bool,
     scratch: &mut TrenchScratch,
 ) {
     let n = mesh.len();
@@ -993,15 +1004,21 @@ fn trench_candidates(
     // Each point in its subducting plate's frame, and the vertex nearest it there (located on
     // their own: the walks' reads miss the cache, about 2 µs a point).
     sc.seeds.clear();
-    sc.order
-        .par_iter()
-        .with_min_len(256)
-        .map(|&(sub, sample, k)| {
-            let (s, o) = (table.get(sub)?, table.get(fp.overriding[k as usize])?);
-            let p = s.plate_from_world * (o.world_from_plate * pos[sample as usize]);
-            Some((p, mesh.nearest_vertex(p)))
-        })
-        .collect_into_vec(&mut sc.seeds);
+    let place = |&(sub, sample, k): &(u32, u32, u32)| {
+        let (s, o) = (table.get(sub)?, table.get(fp.overriding[k as usize])?);
+        let p = s.plate_from_world * (o.world_from_plate * pos[sample as usize]);
+        Some((p, mesh.nearest_vertex(p)))
+    };
+    // (Serial without rayon at all: off the pool, a parallel loop would run on another pool.)
+    if serial {
+        sc.seeds.extend(sc.order.iter().map(place));
+    } else {
+        sc.order
+            .par_iter()
+            .with_min_len(256)
+            .map(place)
+            .collect_into_vec(&mut sc.seeds);
+    }
     let cos_r = radius.cos();
     let mut from = 0;
     while from < sc.order.len() {
@@ -1123,6 +1140,261 @@ impl TrenchPath<'_> {
     }
 }
 
+/// The trench's constants (from [`Params`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct TrenchConsts {
+    depth_km: f64,
+    width_km: f64,
+    min_speed: f64,
+}
+
+impl TrenchConsts {
+    fn of(params: &Params) -> Self {
+        Self {
+            depth_km: params.isostasy.trench_depth_km,
+            width_km: params.isostasy.trench_width_km,
+            min_speed: params.subduction.min_convergence_mm_per_yr,
+        }
+    }
+}
+
+/// Trench depth per sample into `trench_km` (km below the floor beside it; 0 away from fronts),
+/// from where the floor now stands against the plate that overrides it ([`TrenchPath`]): the
+/// distance, along the floor's motion relative to that plate, to the edge of the plate's
+/// footprint (ahead of floor yet to go under, behind floor gone under), for the floor near a
+/// converging point of a front its plate goes under ([`trench_candidates`]). Cut where the
+/// distance at the last resampling less the convergence since put the floor, the trench lagged
+/// the floor as an interval aged and thinned into dashes (docs/relief.md). Floor that slides
+/// past a plate, on a small plate's flanks or along a front, never reaches the edge along its
+/// path and gets no trench, so a small plate is not ringed. With `serial`, one thread's work
+/// (on the thread [`begin_trench`] starts), else in parallel loops; the depths are the same.
+#[allow(clippy::too_many_arguments)]
+fn trench_depths(
+    mesh: &SphereMesh,
+    table: &PlateTable,
+    fp: &FrontPoints,
+    plate: &[u32],
+    crust_type: &[CrustType],
+    c: TrenchConsts,
+    serial: bool,
+    scratch: &mut TrenchScratch,
+    trench_km: &mut Vec<f32>,
+) {
+    let n = mesh.len();
+    trench_km.clear();
+    trench_km.resize(n, 0.0);
+    if fp.is_empty() || plate.len() < n || crust_type.len() < n {
+        return;
+    }
+    let (depth, width, min_speed) = (c.depth_km, c.width_km, c.min_speed);
+    let r_km = mesh.radius_km;
+    let spacing = mesh.mean_spacing_rad() * r_km;
+    let positions = &mesh.positions;
+    let (reach, tol) = ((width + spacing) / r_km, 0.5 * spacing / r_km);
+    // The trench reaches a quarter spacing past its width along the path; the edge stands
+    // within about half a spacing of the nearest front point (an overriding sample at the
+    // boundary).
+    let radius = (width + spacing) / r_km;
+    trench_candidates(mesh, table, fp, plate, radius, min_speed, serial, scratch);
+    let near = &scratch.point;
+    let cut = |(i, t): (usize, &mut f32)| {
+        let k = near[i];
+        if k == NONE || crust_type[i] != CrustType::Oceanic {
+            return;
+        }
+        let k = k as usize;
+        let (Some(s), Some(o)) = (table.get(plate[i]), table.get(fp.overriding[k])) else {
+            return;
+        };
+        let q = s.world_from_plate * positions[i];
+        let v = s.motion.velocity_km_per_my(q, r_km) - o.motion.velocity_km_per_my(q, r_km);
+        let speed = v.length();
+        if !(speed > min_speed) {
+            return;
+        }
+        let path = TrenchPath {
+            mesh,
+            plate,
+            over: o.id,
+            over_from_world: o.plate_from_world,
+        };
+        if let Some(d) = path.distance_rad(q, v / speed, fp.sample[k], reach, tol) {
+            let depth_here = trench_depth_on_mesh_km(d * r_km, depth, width, spacing);
+            if depth_here > 0.0 {
+                *t = depth_here as f32;
+            }
+        }
+    };
+    if serial {
+        trench_km.iter_mut().enumerate().for_each(cut);
+    } else {
+        trench_km
+            .par_iter_mut()
+            .enumerate()
+            .with_min_len(4096)
+            .for_each(cut);
+    }
+}
+
+/// What the trench's task hands back: the depths, its scratch, and the copies it read.
+struct TrenchDone {
+    trench_km: Vec<f32>,
+    scratch: TrenchScratch,
+    table: PlateTable,
+    plate: Vec<u32>,
+    crust_type: Vec<CrustType>,
+}
+
+/// The trench computed on the thread pool beside the rivers, coasts and sediment
+/// ([`begin_trench`]), taken by the isostasy ([`take_trench`]).
+struct TrenchTask {
+    rx: Mutex<Receiver<std::thread::Result<TrenchDone>>>,
+    /// [`FrontPoints`]' last change when the task started.
+    fronts_tick: bevy_ecs::change_detection::Tick,
+    consts: TrenchConsts,
+}
+
+/// Waits for what `rx` will hand over. On a thread of the pool (a simulation run inside
+/// `ThreadPool::install`) it runs the pool's pending tasks while it waits, so a pool of one
+/// thread does not wait on itself. `None` if the sender went away.
+fn wait_for<T>(rx: Mutex<Receiver<T>>) -> Option<T> {
+    let rx = rx.into_inner().unwrap_or_else(|e| e.into_inner());
+    if rayon::current_thread_index().is_some() {
+        loop {
+            match rx.try_recv() {
+                Ok(r) => return Some(r),
+                Err(TryRecvError::Disconnected) => return None,
+                Err(TryRecvError::Empty) => {
+                    if rayon::yield_now() != Some(rayon::Yield::Executed) {
+                        std::thread::yield_now();
+                    }
+                }
+            }
+        }
+    } else {
+        rx.recv().ok()
+    }
+}
+
+/// Starts the trench of this step ([`trench_depths`]) as a task of the thread pool, on copies
+/// of what it reads (the plate and crust type of each sample, the plates, the front points;
+/// the mesh is shared), so that it runs beside the rivers, coasts and sediment, which leave
+/// those alone; [`apply_isostasy`] takes it, or computes the trench itself when any of them
+/// changed since. The depths are the same either way, whatever the thread count.
+pub fn begin_trench(
+    params: Res<Params>,
+    mesh: Res<SphereMesh>,
+    crust: Res<Crust>,
+    mut state: ResMut<ReliefState>,
+    fp: Res<FrontPoints>,
+    plates: Query<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>,
+) {
+    let n = mesh.len();
+    let state = &mut *state;
+    // A task left from a step whose isostasy did not run: its buffers come back first.
+    if let Some(task) = state.trench_task.take()
+        && let Some(done) = wait_for(task.rx)
+    {
+        keep_trench_buffers(state, done.unwrap_or_else(|p| std::panic::resume_unwind(p)));
+    }
+    // With one worker thread asked for, no second thread: the isostasy computes the trench.
+    if fp.is_empty()
+        || crust.plate.len() < n
+        || crust.crust_type.len() < n
+        || rayon::current_num_threads() < 2
+    {
+        return;
+    }
+    let mut plate = std::mem::take(&mut state.trench_plate);
+    plate.clear();
+    plate.extend_from_slice(&crust.plate[..n]);
+    let mut crust_type = std::mem::take(&mut state.trench_types);
+    crust_type.clear();
+    crust_type.extend_from_slice(&crust.crust_type[..n]);
+    let table = PlateTable::from_query(&plates);
+    let fronts = fp.clone();
+    let mesh = mesh.clone();
+    let mut scratch = std::mem::take(&mut state.trench_scratch);
+    let mut trench_km = std::mem::take(&mut state.trench_km);
+    let consts = TrenchConsts::of(&params);
+    let (tx, rx) = std::sync::mpsc::sync_channel(1);
+    let job = move || {
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || {
+            trench_depths(
+                &mesh,
+                &table,
+                &fronts,
+                &plate,
+                &crust_type,
+                consts,
+                true,
+                &mut scratch,
+                &mut trench_km,
+            );
+            TrenchDone {
+                trench_km,
+                scratch,
+                table,
+                plate,
+                crust_type,
+            }
+        }));
+        let _ = tx.send(result);
+    };
+    // A thread of its own, not a task of the pool: a pool thread waiting in a parallel loop of
+    // the sediment would take the task and run it there (measured: the sediment then took
+    // about 10 ms more a step at 500k). If none starts, the isostasy computes the trench.
+    if std::thread::Builder::new()
+        .name("trench".into())
+        .spawn(job)
+        .is_err()
+    {
+        return;
+    }
+    state.trench_task = Some(TrenchTask {
+        rx: Mutex::new(rx),
+        fronts_tick: fp.last_changed(),
+        consts,
+    });
+}
+
+/// Puts a finished task's buffers back into `state` (its depths as the buffer for the next).
+fn keep_trench_buffers(state: &mut ReliefState, done: TrenchDone) {
+    state.trench_km = done.trench_km;
+    state.trench_scratch = done.scratch;
+    state.trench_plate = done.plate;
+    state.trench_types = done.crust_type;
+}
+
+/// Takes the trench [`begin_trench`] started, if any: true, with its depths in
+/// `state.trench_km`, when it read what the isostasy would read now (the same front points,
+/// plates, plate and crust type of every sample, and constants); false otherwise (the caller
+/// computes the trench). A panic in the task goes on here.
+fn take_trench(
+    state: &mut ReliefState,
+    fp: &Res<FrontPoints>,
+    table: &PlateTable,
+    host: &Crust,
+    consts: TrenchConsts,
+    n: usize,
+) -> bool {
+    let Some(task) = state.trench_task.take() else {
+        return false;
+    };
+    let Some(result) = wait_for(task.rx) else {
+        return false;
+    };
+    let done = result.unwrap_or_else(|p| std::panic::resume_unwind(p));
+    let current = task.fronts_tick == fp.last_changed()
+        && task.consts == consts
+        && done.table.plates == table.plates
+        && done.trench_km.len() == n
+        && host.plate.get(..n) == Some(&done.plate[..])
+        && host.crust_type.get(..n) == Some(&done.crust_type[..]);
+    keep_trench_buffers(state, done);
+    current
+}
+
 /// Trench depth (km below the floor beside it) of a subducting ocean sample whose distance to
 /// its front is `d_km` (negative once it passed under): `depth·(1 − |d|/w)²` within `w` of the
 /// front, deepest at the front. Past the front the sample lies under the overriding plate; the
@@ -1182,9 +1454,11 @@ pub fn apply_isostasy(
     if ensure_graph(&mut state.graph, &mesh) {
         state.iso_key = None;
     }
-    let Some(g) = state.graph.as_ref() else {
+    // (A handle of its own: the trench below takes `state` whole.)
+    let Some(graph) = state.graph.clone() else {
         return;
     };
+    let g = &*graph;
     // The regional levels depend on the mesh and on T_e (through σ).
     let key = (n, iso.regional_sigma_km().to_bits());
     if state.iso_key != Some(key) {
@@ -1216,74 +1490,22 @@ pub fn apply_isostasy(
             .iso
             .smooth_root(g, &host.thickness_km, &state.continental, &iso);
     }
-    // Trench depth per sample, from where the floor now stands against the plate that overrides
-    // it ([`TrenchPath`]): the distance, along the floor's motion relative to that plate, to the
-    // edge of the plate's footprint (ahead of floor yet to go under, behind floor gone under),
-    // for the floor near a converging point of a front its plate goes under
-    // ([`trench_candidates`]). Cut where the distance at the last resampling less the
-    // convergence since put the floor, the trench lagged the floor as an interval aged and
-    // thinned into dashes (docs/relief.md). Floor that slides past a plate, on a small plate's
-    // flanks or along a front, never reaches the edge along its path and gets no trench, so a
-    // small plate is not ringed.
-    state.trench_km.clear();
-    state.trench_km.resize(n, 0.0);
-    if !fp.is_empty() && host.plate.len() >= n {
-        let (depth, width) = (ip.trench_depth_km, ip.trench_width_km);
-        let r_km = mesh.radius_km;
-        let spacing = mesh.mean_spacing_rad() * r_km;
-        let table = PlateTable::from_query(&plates);
-        let positions = &mesh.positions;
-        let plate = &host.plate;
-        let mesh: &SphereMesh = &mesh;
-        let (reach, tol) = ((width + spacing) / r_km, 0.5 * spacing / r_km);
-        let min_speed = params.subduction.min_convergence_mm_per_yr;
-        // The trench reaches a quarter spacing past its width along the path; the edge stands
-        // within about half a spacing of the nearest front point (an overriding sample at the
-        // boundary).
-        let radius = (width + spacing) / r_km;
-        trench_candidates(
-            mesh,
+    // The trench (see [`trench_depths`]): from the task [`begin_trench`] started beside the
+    // surface processes when what it read still holds, computed here otherwise.
+    let table = PlateTable::from_query(&plates);
+    let tc = TrenchConsts::of(&params);
+    if !take_trench(state, &fp, &table, host, tc, n) {
+        trench_depths(
+            &mesh,
             &table,
             &fp,
-            plate,
-            radius,
-            min_speed,
+            &host.plate,
+            &host.crust_type,
+            tc,
+            false,
             &mut state.trench_scratch,
+            &mut state.trench_km,
         );
-        let near = &state.trench_scratch.point;
-        state
-            .trench_km
-            .par_iter_mut()
-            .enumerate()
-            .with_min_len(4096)
-            .for_each(|(i, t)| {
-                let k = near[i];
-                if k == NONE || host.crust_type[i] != CrustType::Oceanic {
-                    return;
-                }
-                let k = k as usize;
-                let (Some(s), Some(o)) = (table.get(plate[i]), table.get(fp.overriding[k])) else {
-                    return;
-                };
-                let q = s.world_from_plate * positions[i];
-                let v = s.motion.velocity_km_per_my(q, r_km) - o.motion.velocity_km_per_my(q, r_km);
-                let speed = v.length();
-                if !(speed > min_speed) {
-                    return;
-                }
-                let path = TrenchPath {
-                    mesh,
-                    plate,
-                    over: o.id,
-                    over_from_world: o.plate_from_world,
-                };
-                if let Some(d) = path.distance_rad(q, v / speed, fp.sample[k], reach, tol) {
-                    let depth_here = trench_depth_on_mesh_km(d * r_km, depth, width, spacing);
-                    if depth_here > 0.0 {
-                        *t = depth_here as f32;
-                    }
-                }
-            });
     }
     let Some((_, _, table)) = state.table.as_ref() else {
         return;

@@ -477,23 +477,7 @@ pub fn finish_climate(cs: &mut ClimateState, rain: &mut Precipitation) {
     let Some(rx) = cs.pending.take() else {
         return;
     };
-    let rx = rx.into_inner().unwrap_or_else(|e| e.into_inner());
-    let result = if rayon::current_thread_index().is_some() {
-        loop {
-            match rx.try_recv() {
-                Ok(r) => break Some(r),
-                Err(TryRecvError::Disconnected) => break None,
-                Err(TryRecvError::Empty) => {
-                    if rayon::yield_now() != Some(rayon::Yield::Executed) {
-                        std::thread::yield_now();
-                    }
-                }
-            }
-        }
-    } else {
-        rx.recv().ok()
-    };
-    match result {
+    match wait_for(rx) {
         Some(Ok((out, scratch, took))) => {
             rain.0 = out;
             cs.scratch = scratch;

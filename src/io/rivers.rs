@@ -77,7 +77,7 @@ impl RiverNetwork {
         }
     }
 
-    /// [`Self::of`] on a sample graph already built (see [`relief_graph`]; `positions`: its
+    /// [`Self::of`] on a sample graph already built (see [`relief_graph`](crate::systems::relief::network::relief_graph); `positions`: its
     /// unit positions).
     pub fn on_graph(
         g: &ReliefGraph,

@@ -4,6 +4,7 @@
 //! subduction front. With it on, subduction, collisions, erosion and deposition change the
 //! crust's thickness and the elevation is derived; off, the kernels raise the elevation as the
 //! paper does. Systems: [`crate::systems::relief`] ([`apply_isostasy`](relief::apply_isostasy),
+//! with the trench started beside the sediment by [`begin_trench`](relief::begin_trench),
 //! on [`relief::isostasy`]).
 
 use bevy_app::{App, Plugin};
@@ -48,9 +49,8 @@ impl Plugin for IsostasyPlugin {
                 .run_if(phenomenon_enabled(ISOSTASY)),
         );
         // The trench's geometry reads nothing the surface processes write: it runs on a
-        // thread of the pool beside the sediment's routing (one thread's work, as the router
-        // is; started before the rivers, it took their parallel loops' second thread), and the
-        // isostasy takes it.
+        // thread of its own beside the sediment's routing, which is serial (started before the
+        // rivers, it took their parallel loops' second core), and the isostasy takes it.
         app.add_systems(
             TectonicStep,
             relief::begin_trench

@@ -940,7 +940,7 @@ const OPEN: u8 = 1;
 const SEA: u8 = 2;
 
 /// Steepest slope (m/m) under which a land sample counts as lying on a plain: its receiver is
-/// drawn among the lower neighbours nearly as steep (see [`pick_receiver`]). Lowland rivers
+/// drawn among the lower neighbours nearly as steep (see `pick_receiver`). Lowland rivers
 /// fall 0.1–1 m per km.
 pub const PLAIN_SLOPE: f32 = 1.0e-3;
 

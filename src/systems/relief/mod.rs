@@ -230,9 +230,10 @@ pub struct ReliefState {
     continental: Vec<bool>,
     fill: Vec<f32>,
     trench_scratch: TrenchScratch,
-    /// The trench running beside the surface processes ([`begin_trench`]).
+    /// The trench running beside the sediment ([`begin_trench`]).
     trench_task: Option<TrenchTask>,
-    /// The task's copies of each sample's plate and crust type (kept for the next step's).
+    /// The trench thread's copies of each sample's plate and crust type (kept for the next
+    /// step's).
     trench_plate: Vec<u32>,
     trench_types: Vec<CrustType>,
     /// Trench depth below the sea floor beside it, km per sample (0 away from fronts), as cut
@@ -1220,7 +1221,7 @@ fn trench_depths(
     }
 }
 
-/// What the trench's task hands back: the depths, its scratch, and the copies it read.
+/// What the trench's thread hands back: the depths, its scratch, and the copies it read.
 struct TrenchDone {
     trench_km: Vec<f32>,
     scratch: TrenchScratch,
@@ -1229,8 +1230,9 @@ struct TrenchDone {
     crust_type: Vec<CrustType>,
 }
 
-/// The trench computed on the thread pool beside the rivers, coasts and sediment
-/// ([`begin_trench`]), taken by the isostasy ([`take_trench`]).
+/// The trench computed on a thread of its own beside the sediment ([`begin_trench`]), taken by
+/// the isostasy ([`take_trench`]). While it runs, [`ReliefState::trench_km`] is empty (the
+/// thread holds the buffer).
 struct TrenchTask {
     rx: Mutex<Receiver<std::thread::Result<TrenchDone>>>,
     /// [`FrontPoints`]' last change when the task started.
@@ -1260,11 +1262,12 @@ fn wait_for<T>(rx: Mutex<Receiver<T>>) -> Option<T> {
     }
 }
 
-/// Starts the trench of this step ([`trench_depths`]) as a task of the thread pool, on copies
-/// of what it reads (the plate and crust type of each sample, the plates, the front points;
-/// the mesh is shared), so that it runs beside the rivers, coasts and sediment, which leave
-/// those alone; [`apply_isostasy`] takes it, or computes the trench itself when any of them
-/// changed since. The depths are the same either way, whatever the thread count.
+/// Starts the trench of this step (`trench_depths`) on a thread of its own, on copies of what
+/// it reads (the plate and crust type of each sample, the plates, the front points; the mesh is
+/// shared), so that it runs beside the sediment, which leaves those alone; [`apply_isostasy`]
+/// takes it, or computes the trench itself when any of them changed since. The depths are the
+/// same either way, whatever the thread count. With one worker thread asked for
+/// (`--threads 1`), it starts nothing.
 pub fn begin_trench(
     params: Res<Params>,
     mesh: Res<SphereMesh>,
@@ -1275,7 +1278,7 @@ pub fn begin_trench(
 ) {
     let n = mesh.len();
     let state = &mut *state;
-    // A task left from a step whose isostasy did not run: its buffers come back first.
+    // A thread left from a step whose isostasy did not run: its buffers come back first.
     if let Some(task) = state.trench_task.take()
         && let Some(done) = wait_for(task.rx)
     {
@@ -1350,7 +1353,7 @@ fn keep_trench_buffers(state: &mut ReliefState, done: TrenchDone) {
     state.trench_types = done.crust_type;
 }
 
-/// Takes the trench [`begin_trench`] started, if any: true, with its depths in
+/// Takes the trench whose thread [`begin_trench`] started, if any: true, with its depths in
 /// `state.trench_km`, when it read what the isostasy would read now (the same front points,
 /// plates, plate and crust type of every sample, and constants); false otherwise (the caller
 /// computes the trench). A panic in the task goes on here.

@@ -399,11 +399,7 @@ fn default_planet_after_250_my_is_healthy() {
 #[test]
 fn same_seed_same_bits_with_one_thread_or_two() {
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        in_pool(threads, || {
             let mut p = params(40_000, 21);
             p.resample.min_interval_steps = 7;
             p.resample.max_interval_steps = 7;
@@ -456,11 +452,7 @@ fn a_crust_changed_beside_the_trench_thread_is_not_missed() {
         }
     }
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        in_pool(threads, || {
             let plugins = TectonicPlugins.build().add(Flip);
             let mut sim = Simulation::with_plugins(params(40_000, 21), plugins).unwrap();
             sim.run_steps(6).unwrap();

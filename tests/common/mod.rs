@@ -12,6 +12,16 @@ pub fn params(samples: u64, seed: u64) -> Params {
     p
 }
 
+/// Runs `f` inside a pool of `threads` worker threads (for results that must not depend on the
+/// thread count).
+pub fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("thread pool")
+        .install(f)
+}
+
 /// A small, busy planet: 12 plates, resampled every 4 to 9 steps (collisions, lakes and
 /// resamplings come within a few tens of steps).
 pub fn small_params(samples: u64, seed: u64) -> Params {

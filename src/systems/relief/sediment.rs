@@ -526,7 +526,7 @@ impl SedimentRouter {
             if self.lakes_into[i] != NO_LAKE {
                 self.fill_lakes_into(i, g, drainage, elevation_km, &ff, &mut b);
             }
-            let q = self.flux[i];
+            let mut q = self.flux[i];
             if q <= 0.0 {
                 continue;
             }
@@ -582,8 +582,7 @@ impl SedimentRouter {
             // A river on ground flatter than its graded slope lays down what raises the ground
             // to that slope above its receiver (or above the sea at its mouth): alluvial
             // plains and delta tops, built from the sea up as the ground subsides.
-            let mut q = q;
-            if p.graded_slope > 0.0 && q > 0.0 {
+            if p.graded_slope > 0.0 {
                 let d = drainage.receiver_km[i] as f64;
                 let (base, run) = if ocean[r] {
                     (0.0, 0.5 * d)

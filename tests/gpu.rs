@@ -1665,10 +1665,12 @@ fn relief_on_the_gpu_backend_runs_isostasy_and_diffusion_on_the_device() {
     let n = 20_000usize;
     let mut sim = gpu_sim(n as u64, 9, false);
     // Collisions without a resampling: a step that detaches a terrane uploads its plate ids.
-    sim.world_mut()
-        .resource_mut::<Params>()
-        .collision
-        .resample_at_suture = false;
+    // The surface processes on every step, so that every step diffuses.
+    {
+        let mut p = sim.world_mut().resource_mut::<Params>();
+        p.collision.resample_at_suture = false;
+        p.time.relief_interval_steps = 1;
+    }
     sim.step().expect("first step");
     let mut measured = Vec::new();
     for _ in 0..12 {

@@ -34,7 +34,8 @@ impl Plugin for CoastsPlugin {
             .init_resource::<coast::CoastState>();
         app.add_systems(
             TectonicStep,
-            coast::erode_coasts
+            super::isostasy::isostasy_on
+                .pipe(coast::erode_coasts)
                 .in_set(TectonicSystems::Coasts)
                 .run_if(phenomenon_enabled(COASTS))
                 .run_if(phenomenon_enabled(DRAINAGE))

@@ -32,7 +32,8 @@ impl Plugin for RiversPlugin {
             .init_resource::<relief::SurfaceFlux>();
         app.add_systems(
             TectonicStep,
-            relief::erode_rivers
+            super::isostasy::isostasy_on
+                .pipe(relief::erode_rivers)
                 .in_set(TectonicSystems::Rivers)
                 .run_if(phenomenon_enabled(RIVERS))
                 .run_if(phenomenon_enabled(DRAINAGE))

@@ -780,7 +780,7 @@ pub fn erode_rivers(
 /// cuts), and the isostasy after the surface processes floats it. Without the isostasy nothing
 /// would raise the land between steps, so there is no lift. Tried and not kept: leaving the
 /// lifts in place (the sediment then sees the lifted surface); on seed 1 at 100k the land
-/// fraction fell 0.02 below an every-step run over the first 40 My, against 0.003 with the
+/// fraction fell 0.02 below an every-step run from 10 to 40 My, against within 0.003 with the
 /// lifts taken back (docs/relief.md).
 pub fn substep_rebound(params: &Params, isostasy_on: bool) -> f32 {
     if isostasy_on {

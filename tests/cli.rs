@@ -614,6 +614,59 @@ fn init_flag_picks_the_start_method() {
     );
 }
 
+/// `--relief-every K` sets how often the surface processes run: 1 is the default (the same
+/// bytes as without the flag), 2 gives another planet, and 0 or 17 are refused with the
+/// parameter and its range named. Seen to fail with the flag parsed but not applied.
+#[test]
+fn relief_every_flag_sets_how_often_the_surface_processes_run() {
+    let run = |k: Option<&str>| -> (std::process::Output, std::path::PathBuf) {
+        let out = temp_dir(&format!("relief-every-{}", k.unwrap_or("none")));
+        let dir = out.to_string_lossy().to_string();
+        let mut args = vec![
+            "generate",
+            "--quiet",
+            "--samples",
+            "3000",
+            "--plates",
+            "10",
+            "--my",
+            "20",
+            "--width",
+            "128",
+            "--backend",
+            "cpu",
+            "--out",
+            &dir,
+        ];
+        if let Some(k) = k {
+            args.extend(["--relief-every", k]);
+        }
+        let o = planet().args(&args).output().expect("run planet generate");
+        (o, out)
+    };
+    let map = |k: Option<&str>| -> Vec<u8> {
+        let (o, out) = run(k);
+        assert!(
+            o.status.success(),
+            "generate --relief-every {k:?} failed: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        std::fs::read(out.join("elevation16.png")).expect("elevation16.png")
+    };
+    let default = map(None);
+    assert_eq!(map(Some("1")), default, "1 is not the default");
+    assert_ne!(map(Some("2")), default, "--relief-every 2 changed nothing");
+    for bad in ["0", "17"] {
+        let (o, _) = run(Some(bad));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "--relief-every {bad} was accepted");
+        assert!(
+            err.contains("relief_interval_steps") && err.contains("16"),
+            "--relief-every {bad}: {err}"
+        );
+    }
+}
+
 /// `--craters N` strikes N craters into the initial crust (the map changes; none is the
 /// default), and a smallest radius above the largest is refused with both keys named.
 /// Seen to fail with the flag parsed but not applied.

@@ -87,6 +87,12 @@ pub(crate) struct PlanetArgs {
     /// 2,500 km by default). Sets `init.craters`.
     #[arg(long)]
     pub(crate) craters: Option<u64>,
+    /// Run the surface processes (climate, drainage, rivers, coasts, sediment) on one step in K,
+    /// over K steps at once (1 to 16; 1, every step, is the default). K = 2 builds the default
+    /// planet in about four fifths of the time, with more lakes and somewhat higher land
+    /// (docs/relief.md). Sets `time.relief_interval_steps`.
+    #[arg(long, value_name = "K")]
+    pub(crate) relief_every: Option<u64>,
     #[command(flatten)]
     pub(crate) switches: SwitchArgs,
     /// Worker threads (default: all cores). Results do not depend on it.
@@ -257,6 +263,13 @@ pub(crate) fn load_params(a: &PlanetArgs, base: Params) -> Result<Params> {
     }
     if let Some(c) = a.craters {
         set(&mut params, "init.craters", ParamValue::Int(c))?;
+    }
+    if let Some(k) = a.relief_every {
+        set(
+            &mut params,
+            "time.relief_interval_steps",
+            ParamValue::Int(k),
+        )?;
     }
     params.validate()?;
     Ok(params)

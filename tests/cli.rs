@@ -439,8 +439,9 @@ fn bench_times_steady_and_resampling_steps_apart() {
 }
 
 /// `planet bench --from SAVE` times the steps of a saved planet: it says it loaded the save and
-/// at what time, times the relief sets of the steps after it, and a missing save is a clear
-/// error naming the path.
+/// at what time, times the relief sets of the steps after it, runs them as often as the save's
+/// parameters say or `--relief-every` asks (0 refused), and a missing save is a clear error
+/// naming the path.
 #[test]
 fn bench_from_a_save_times_the_saved_planet() {
     let dir = temp_dir("bench-from");
@@ -471,6 +472,45 @@ fn bench_from_a_save_times_the_saved_planet() {
         .and_then(|v| v.parse::<f64>().ok())
         .unwrap_or_else(|| panic!("no drainage time in:\n{stdout}"));
     assert!(drainage > 0.0, "{stdout}");
+    assert!(
+        stdout.contains("surface processes every 1 steps"),
+        "{stdout}"
+    );
+    // `--relief-every` applies to the loaded planet.
+    let out = planet()
+        .args([
+            "bench",
+            "--steps",
+            "3",
+            "--resamplings",
+            "0",
+            "--relief-every",
+            "2",
+        ])
+        .arg("--from")
+        .arg(&save)
+        .output()
+        .expect("run planet bench");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("surface processes every 2 steps"),
+        "{stdout}"
+    );
+    fails_with(
+        &[
+            "bench",
+            "--relief-every",
+            "0",
+            "--from",
+            save.to_str().unwrap(),
+        ],
+        &["relief_interval_steps", "1..=16"],
+    );
     fails_with(
         &[
             "bench",

@@ -22,8 +22,8 @@ pub(crate) struct BenchArgs {
     pub(crate) steps: u64,
     /// Time the steps of a saved planet (a `.planet` file) instead of a new one: a mature
     /// planet's relief passes cost more than a young one's. The planet's own parameters are
-    /// used (the options that make a new planet are not); `--threads`, `--backend`, `--enable`
-    /// and `--disable` still apply.
+    /// used (the options that make a new planet are not); `--threads`, `--backend`, `--enable`,
+    /// `--disable` and `--relief-every` still apply.
     #[arg(long, value_name = "SAVE")]
     pub(crate) from: Option<std::path::PathBuf>,
     /// Extra forced resamplings to time after the steps.
@@ -109,6 +109,13 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
                 &a.planet.switches.disable,
             )?;
             check_length(sim.mesh().len())?;
+            if let Some(k) = a.planet.relief_every {
+                let mut p = sim.params().clone();
+                p.set("time.relief_interval_steps", ParamValue::Int(k))?;
+                p.validate()?;
+                *sim.world_mut()
+                    .resource_mut::<tectonic_planets::resources::Params>() = p;
+            }
             sim
         }
         None => {

@@ -14,6 +14,34 @@ fn temp_dir(name: &str) -> PathBuf {
     d
 }
 
+/// `planet generate` of a small planet (3,000 samples, 10 plates, `my` My, 128 px maps, CPU)
+/// with `extra` options, into a fresh temporary folder named after `name`: the run's output and
+/// the folder.
+fn small_generate(name: &str, my: &str, extra: &[&str]) -> (std::process::Output, PathBuf) {
+    let out = temp_dir(name);
+    let o = planet()
+        .args([
+            "generate",
+            "--quiet",
+            "--samples",
+            "3000",
+            "--plates",
+            "10",
+            "--my",
+            my,
+            "--width",
+            "128",
+            "--backend",
+            "cpu",
+        ])
+        .args(extra)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("run planet generate");
+    (o, out)
+}
+
 /// Generates a 4,000-sample planet of 8 plates over `my` My with the `extra` options (its maps in
 /// `dir/out`), saves it as `dir/name` and returns that path.
 fn save_small_planet(dir: &std::path::Path, name: &str, my: &str, extra: &[&str]) -> PathBuf {
@@ -605,28 +633,8 @@ fn bench_table2_prints_the_papers_layout_with_ours_beside_it() {
 #[test]
 fn init_flag_picks_the_start_method() {
     let run = |init: Option<&str>| -> Vec<u8> {
-        let out = temp_dir(&format!("init-{}", init.unwrap_or("default")));
-        let mut args = vec![
-            "generate",
-            "--quiet",
-            "--samples",
-            "3000",
-            "--plates",
-            "10",
-            "--my",
-            "0",
-            "--width",
-            "128",
-            "--backend",
-            "cpu",
-            "--out",
-        ];
-        let dir = out.to_string_lossy().to_string();
-        args.push(&dir);
-        if let Some(m) = init {
-            args.extend(["--init", m]);
-        }
-        let o = planet().args(&args).output().expect("run planet generate");
+        let extra: Vec<&str> = init.map_or(vec![], |m| vec!["--init", m]);
+        let (o, out) = small_generate(&format!("init-{}", init.unwrap_or("default")), "0", &extra);
         assert!(
             o.status.success(),
             "generate {init:?} failed: {}",
@@ -659,30 +667,13 @@ fn init_flag_picks_the_start_method() {
 /// parameter and its range named. Seen to fail with the flag parsed but not applied.
 #[test]
 fn relief_every_flag_sets_how_often_the_surface_processes_run() {
-    let run = |k: Option<&str>| -> (std::process::Output, std::path::PathBuf) {
-        let out = temp_dir(&format!("relief-every-{}", k.unwrap_or("none")));
-        let dir = out.to_string_lossy().to_string();
-        let mut args = vec![
-            "generate",
-            "--quiet",
-            "--samples",
-            "3000",
-            "--plates",
-            "10",
-            "--my",
+    let run = |k: Option<&str>| {
+        let extra: Vec<&str> = k.map_or(vec![], |k| vec!["--relief-every", k]);
+        small_generate(
+            &format!("relief-every-{}", k.unwrap_or("none")),
             "20",
-            "--width",
-            "128",
-            "--backend",
-            "cpu",
-            "--out",
-            &dir,
-        ];
-        if let Some(k) = k {
-            args.extend(["--relief-every", k]);
-        }
-        let o = planet().args(&args).output().expect("run planet generate");
-        (o, out)
+            &extra,
+        )
     };
     let map = |k: Option<&str>| -> Vec<u8> {
         let (o, out) = run(k);
@@ -713,28 +704,12 @@ fn relief_every_flag_sets_how_often_the_surface_processes_run() {
 #[test]
 fn craters_flag_scars_the_initial_planet() {
     let run = |craters: Option<&str>| -> Vec<u8> {
-        let out = temp_dir(&format!("craters-{}", craters.unwrap_or("none")));
-        let dir = out.to_string_lossy().to_string();
-        let mut args = vec![
-            "generate",
-            "--quiet",
-            "--samples",
-            "3000",
-            "--plates",
-            "10",
-            "--my",
+        let extra: Vec<&str> = craters.map_or(vec![], |c| vec!["--craters", c]);
+        let (o, out) = small_generate(
+            &format!("craters-{}", craters.unwrap_or("none")),
             "0",
-            "--width",
-            "128",
-            "--backend",
-            "cpu",
-            "--out",
-            &dir,
-        ];
-        if let Some(c) = craters {
-            args.extend(["--craters", c]);
-        }
-        let o = planet().args(&args).output().expect("run planet generate");
+            &extra,
+        );
         assert!(
             o.status.success(),
             "generate --craters {craters:?} failed: {}",

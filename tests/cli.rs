@@ -42,6 +42,24 @@ fn small_generate(name: &str, my: &str, extra: &[&str]) -> (std::process::Output
     (o, out)
 }
 
+/// The map `file` of [`small_generate`] with `flag value` (or without the flag when `value` is
+/// `None`), the run checked to succeed.
+fn small_map(flag: &str, value: Option<&str>, my: &str, file: &str) -> Vec<u8> {
+    let extra: Vec<&str> = value.map_or(vec![], |v| vec![flag, v]);
+    let name = format!(
+        "{}-{}",
+        flag.trim_start_matches('-'),
+        value.unwrap_or("none")
+    );
+    let (o, out) = small_generate(&name, my, &extra);
+    assert!(
+        o.status.success(),
+        "generate {flag} {value:?} failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    std::fs::read(out.join(file)).unwrap_or_else(|e| panic!("{file}: {e}"))
+}
+
 /// Generates a 4,000-sample planet of 8 plates over `my` My with the `extra` options (its maps in
 /// `dir/out`), saves it as `dir/name` and returns that path.
 fn save_small_planet(dir: &std::path::Path, name: &str, my: &str, extra: &[&str]) -> PathBuf {
@@ -632,16 +650,7 @@ fn bench_table2_prints_the_papers_layout_with_ours_beside_it() {
 /// Seen to fail with the flag parsed but not applied.
 #[test]
 fn init_flag_picks_the_start_method() {
-    let run = |init: Option<&str>| -> Vec<u8> {
-        let extra: Vec<&str> = init.map_or(vec![], |m| vec!["--init", m]);
-        let (o, out) = small_generate(&format!("init-{}", init.unwrap_or("default")), "0", &extra);
-        assert!(
-            o.status.success(),
-            "generate {init:?} failed: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        std::fs::read(out.join("crust_type.png")).expect("crust_type.png")
-    };
+    let run = |init: Option<&str>| small_map("--init", init, "0", "crust_type.png");
     let default = run(None);
     assert_eq!(run(Some("voronoi")), default, "voronoi is not the default");
     assert_ne!(
@@ -667,28 +676,16 @@ fn init_flag_picks_the_start_method() {
 /// parameter and its range named. Seen to fail with the flag parsed but not applied.
 #[test]
 fn relief_every_flag_sets_how_often_the_surface_processes_run() {
-    let run = |k: Option<&str>| {
-        let extra: Vec<&str> = k.map_or(vec![], |k| vec!["--relief-every", k]);
-        small_generate(
-            &format!("relief-every-{}", k.unwrap_or("none")),
-            "20",
-            &extra,
-        )
-    };
-    let map = |k: Option<&str>| -> Vec<u8> {
-        let (o, out) = run(k);
-        assert!(
-            o.status.success(),
-            "generate --relief-every {k:?} failed: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        std::fs::read(out.join("elevation16.png")).expect("elevation16.png")
-    };
+    let map = |k: Option<&str>| small_map("--relief-every", k, "20", "elevation16.png");
     let default = map(None);
     assert_eq!(map(Some("1")), default, "1 is not the default");
     assert_ne!(map(Some("2")), default, "--relief-every 2 changed nothing");
     for bad in ["0", "17"] {
-        let (o, _) = run(Some(bad));
+        let (o, _) = small_generate(
+            &format!("relief-every-{bad}"),
+            "20",
+            &["--relief-every", bad],
+        );
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!o.status.success(), "--relief-every {bad} was accepted");
         assert!(
@@ -703,20 +700,7 @@ fn relief_every_flag_sets_how_often_the_surface_processes_run() {
 /// Seen to fail with the flag parsed but not applied.
 #[test]
 fn craters_flag_scars_the_initial_planet() {
-    let run = |craters: Option<&str>| -> Vec<u8> {
-        let extra: Vec<&str> = craters.map_or(vec![], |c| vec!["--craters", c]);
-        let (o, out) = small_generate(
-            &format!("craters-{}", craters.unwrap_or("none")),
-            "0",
-            &extra,
-        );
-        assert!(
-            o.status.success(),
-            "generate --craters {craters:?} failed: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        std::fs::read(out.join("elevation16.png")).expect("elevation16.png")
-    };
+    let run = |craters: Option<&str>| small_map("--craters", craters, "0", "elevation16.png");
     let none = run(None);
     assert_eq!(run(Some("0")), none, "craters are not off by default");
     assert_ne!(run(Some("40")), none, "--craters 40 changed nothing");

@@ -231,17 +231,20 @@ pub fn coastal_erosion_steps(
     rebound: f32,
     scratch: &mut CoastScratch,
 ) -> f64 {
+    let steps = steps.max(1);
+    // The sea grows only between substeps: one substep reads `ocean` itself, uncopied.
     let mut sea = std::mem::take(&mut scratch.sea);
     sea.clear();
-    sea.extend_from_slice(ocean);
+    if steps > 1 {
+        sea.extend_from_slice(ocean);
+    }
     let mut lifted = std::mem::take(&mut scratch.lifted);
     lifted.clear();
     let mut volume = 0.0;
-    let steps = steps.max(1);
     for s in 0..steps {
         volume += coastal_erosion(
             g,
-            &sea,
+            if steps > 1 { &sea } else { ocean },
             elevation_km,
             thickness_km,
             eroded_km,

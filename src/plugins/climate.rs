@@ -40,7 +40,7 @@ impl Plugin for ClimatePlugin {
                 relief::update_climate
                     .run_if(phenomenon_enabled(CLIMATE))
                     .run_if(phenomenon_enabled(DRAINAGE))
-                    .run_if(relief::relief_due),
+                    .run_if(relief::drainage_due),
                 relief::clear_climate.run_if(not(phenomenon_enabled(CLIMATE))),
             )
                 .chain()

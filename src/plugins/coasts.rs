@@ -34,12 +34,10 @@ impl Plugin for CoastsPlugin {
             .init_resource::<coast::CoastState>();
         app.add_systems(
             TectonicStep,
-            super::isostasy::isostasy_on
-                .pipe(coast::erode_coasts)
+            coast::erode_coasts
                 .in_set(TectonicSystems::Coasts)
                 .run_if(phenomenon_enabled(COASTS))
-                .run_if(phenomenon_enabled(DRAINAGE))
-                .run_if(relief::relief_due),
+                .run_if(phenomenon_enabled(DRAINAGE)),
         );
     }
 }

@@ -11,7 +11,7 @@ use bevy_app::{App, Plugin};
 use bevy_ecs::prelude::*;
 
 use super::schedule::{
-    AfterResample, AfterResampleSystems, Phenomena, Phenomenon, PhenomenonAppExt, TectonicStep,
+    AfterResample, AfterResampleSystems, Phenomenon, PhenomenonAppExt, TectonicStep,
     TectonicSystems, phenomenon_enabled,
 };
 use crate::resources::{
@@ -57,7 +57,7 @@ impl Plugin for IsostasyPlugin {
                 .after(TectonicSystems::Coasts)
                 .before(TectonicSystems::Sediment)
                 .run_if(phenomenon_enabled(ISOSTASY))
-                .run_if(relief::relief_due),
+                .run_if(relief::sediment_due),
         );
         // A resampling interpolates the elevation, trenches included, from where the samples
         // were: the trench of floor gone under the overriding plate is lost and what is left shows
@@ -97,13 +97,6 @@ fn load_relief(world: &mut World, r: &mut SectionReader, _v: u32) -> Result<(), 
         f.total_deposited_km3 = deposited;
     }
     Ok(())
-}
-
-/// Whether the isostasy is on: piped into the rivers' and coasts' systems, whose substeps lift
-/// the land they cut by its rebound only when the isostasy floats it
-/// ([`relief::substep_rebound`]).
-pub fn isostasy_on(phenomena: Option<Res<Phenomena>>) -> bool {
-    phenomena.is_some_and(|p| p.is_enabled(ISOSTASY.name()))
 }
 
 /// A save made before the relief phenomena existed kept the crust's thickness constant (35 km

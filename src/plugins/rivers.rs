@@ -32,12 +32,10 @@ impl Plugin for RiversPlugin {
             .init_resource::<relief::SurfaceFlux>();
         app.add_systems(
             TectonicStep,
-            super::isostasy::isostasy_on
-                .pipe(relief::erode_rivers)
+            relief::erode_rivers
                 .in_set(TectonicSystems::Rivers)
                 .run_if(phenomenon_enabled(RIVERS))
-                .run_if(phenomenon_enabled(DRAINAGE))
-                .run_if(relief::relief_due),
+                .run_if(phenomenon_enabled(DRAINAGE)),
         );
     }
 }

@@ -39,6 +39,16 @@ pub struct DiffusionBudget {
     pub substeps: u32,
 }
 
+impl DiffusionBudget {
+    /// Adds the volumes of another call (the sub-steps: the most either used).
+    pub fn add(&mut self, other: &DiffusionBudget) {
+        self.lowered_km3 += other.lowered_km3;
+        self.raised_km3 += other.raised_km3;
+        self.to_ocean_km3 += other.to_ocean_km3;
+        self.substeps = self.substeps.max(other.substeps);
+    }
+}
+
 /// Scratch for [`diffuse_land`].
 #[derive(Clone, Debug, Default)]
 pub struct DiffusionScratch {

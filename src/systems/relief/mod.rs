@@ -74,19 +74,50 @@ use crate::resources::{
     ConvergenceField, Crust, CrustType, FrontPoints, PlateTable, SimClock, StepTimings,
 };
 
-/// The time one run of the surface processes covers, My: the time step times
-/// `time.relief_interval_steps` (they run on one step in that many, see [`relief_due`]).
-pub fn relief_dt_my(params: &Params) -> f64 {
-    params.time.time_step_my * params.time.relief_interval_steps.max(1) as f64
+/// Whether `step` is one of the steps of the drainage, climate and sediment: the first step and
+/// then every `time.relief_interval_steps`-th, counted from the start of the run (so a resumed
+/// save keeps the same steps).
+fn on_relief_step(step: u64, params: &Params) -> bool {
+    step.is_multiple_of(params.time.relief_interval_steps.max(1))
 }
 
-/// Run condition of the surface processes (climate, drainage, rivers, coasts, sediment): true on
-/// the first step and then on every `time.relief_interval_steps`-th, counted from the start of
-/// the run (so a resumed save keeps the same steps).
+/// Run condition: this is one of the steps of the drainage, climate and sediment (see
+/// [`drainage_due`]; every step with `time.relief_interval_steps` = 1, the default).
 pub fn relief_due(clock: Res<SimClock>, params: Res<Params>) -> bool {
-    clock
-        .step
-        .is_multiple_of(params.time.relief_interval_steps.max(1))
+    on_relief_step(clock.step, &params)
+}
+
+/// Run condition of the climate and the drainage: on one step in `time.relief_interval_steps`
+/// ([`relief_due`]), and on any step without a network to follow (the first, the one after a
+/// resampling, the one after the drainage was switched on). The rivers and coasts run every step,
+/// on the last network built; the sediment runs with each new network ([`sediment_due`]).
+pub fn drainage_due(
+    clock: Res<SimClock>,
+    params: Res<Params>,
+    network: Option<Res<DrainageNetwork>>,
+) -> bool {
+    // A network built without its source (before `time.relief_interval_steps` was raised above
+    // 1) cannot go into a save: it is built again.
+    let k = params.time.relief_interval_steps;
+    on_relief_step(clock.step, &params)
+        || !network.is_some_and(|n| n.built && (k <= 1 || n.source.is_some()))
+}
+
+/// Run condition of the sediment's routing: the drainage built the network this step. It lays
+/// down what the rivers and coasts eroded since the last routing.
+pub fn sediment_due(clock: Res<SimClock>, network: Option<Res<DrainageNetwork>>) -> bool {
+    network.is_some_and(|n| n.fresh(clock.step))
+}
+
+/// Run condition of the sediment's routing before a resampling: rock the rivers and coasts
+/// eroded on steps since the last routing is still carried (with
+/// `time.relief_interval_steps` above 1). It is laid down on the last network before the
+/// resampling moves the samples it is recorded on.
+pub fn sediment_carried(
+    flux: Option<Res<SurfaceFlux>>,
+    network: Option<Res<DrainageNetwork>>,
+) -> bool {
+    flux.is_some_and(|f| f.pending && f.carried) && network.is_some_and(|n| n.built)
 }
 
 /// The isostasy constants of `params`.
@@ -137,14 +168,108 @@ pub fn sediment_params(params: &Params) -> SedimentParams {
     }
 }
 
-/// The drainage network of the current surface (a resource, rebuilt every step by
-/// [`build_drainage`]): receivers, the stack, drainage areas, lakes, the sea mask.
+/// The drainage network of the surface (a resource, built by [`build_drainage`] on the steps
+/// of [`drainage_due`]): receivers, the stack, drainage areas, lakes, the sea mask.
 #[derive(Resource, Default)]
 pub struct DrainageNetwork {
     /// The network (see [`Drainage`]).
     pub drainage: Drainage,
-    /// True once built for the current crust.
+    /// True while the network is there to follow: from its build until the next resampling
+    /// moves the samples.
     pub built: bool,
+    /// The step it was built on ([`SimClock::step`] as the relief sets see it).
+    pub built_step: u64,
+    /// What it was built from, kept while it serves later steps
+    /// (`time.relief_interval_steps` above 1): a save holds it, and a load rebuilds the same
+    /// network from it ([`DrainageNetwork::rebuild`]).
+    pub source: Option<NetworkSource>,
+}
+
+/// The inputs a network was built from (see [`DrainageNetwork::source`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct NetworkSource {
+    /// The surface, km.
+    pub elevation_km: Vec<f32>,
+    /// Which samples were oceanic crust.
+    pub oceanic: Vec<bool>,
+    /// The rain it weighed its areas with (empty: uniform).
+    pub rain: Vec<f32>,
+}
+
+impl DrainageNetwork {
+    /// Built on `step` (the surface processes of that step run on a network of their own
+    /// surface: the sediment routes only then).
+    pub fn fresh(&self, step: u64) -> bool {
+        self.built && self.built_step == step
+    }
+
+    /// Forgets the network (a resampling moved the samples): the next step builds one.
+    pub fn forget(&mut self) {
+        self.built = false;
+        self.source = None;
+    }
+
+    /// Builds the network again from the `source` it was built from on `step` (a save's): the
+    /// same network, bit for bit. `oceanic` of the relief state is set to the source's.
+    pub fn rebuild(
+        &mut self,
+        params: &Params,
+        mesh: &SphereMesh,
+        state: &mut ReliefState,
+        source: NetworkSource,
+        step: u64,
+    ) {
+        let n = mesh.len();
+        if ensure_graph(&mut state.graph, mesh) {
+            state.iso_key = None;
+        }
+        let Some(g) = state.graph.as_ref() else {
+            return;
+        };
+        if source.elevation_km.len() != n || source.oceanic.len() != n {
+            return;
+        }
+        route_network(
+            g,
+            params,
+            &source.elevation_km,
+            &source.oceanic,
+            &mut self.drainage,
+            &mut state.sea,
+        );
+        let rain = Some(&source.rain[..]).filter(|r| r.len() == n);
+        self.drainage.compute_areas(g, rain);
+        state.oceanic.clone_from(&source.oceanic);
+        self.built = true;
+        self.built_step = step;
+        self.source = Some(source);
+    }
+}
+
+/// The sea mask and the routes of the surface `elevation_km` (oceanic crust `oceanic`) into
+/// `drainage`; the areas come after ([`Drainage::compute_areas`]).
+fn route_network(
+    g: &ReliefGraph,
+    params: &Params,
+    elevation_km: &[f32],
+    oceanic: &[bool],
+    drainage: &mut Drainage,
+    sea: &mut SeaMaskScratch,
+) -> std::time::Duration {
+    let mut ocean = std::mem::take(&mut drainage.ocean);
+    let t_sea = std::time::Instant::now();
+    sea_mask_with(
+        g,
+        elevation_km,
+        oceanic,
+        params.rivers.min_sea_area_km2,
+        &mut ocean,
+        sea,
+    );
+    drainage.lake_area_ratio = lake_area_ratio(params);
+    let sea_ms = t_sea.elapsed();
+    drainage.compute_routes(g, elevation_km, &ocean);
+    sea_ms
 }
 
 /// Relative rain per sample (1 = the planet's mean; a resource a plugin may set). Drainage
@@ -178,6 +303,13 @@ pub struct SurfaceFlux {
     pub total_eroded_km3: f64,
     /// See `total_eroded_km3`.
     pub total_deposited_km3: f64,
+    /// Rock has been eroded into this flux and not laid down yet.
+    pub pending: bool,
+    /// The flux was opened on a step without a network of its own (with
+    /// `time.relief_interval_steps` above 1): the next network's routing lays it down with its
+    /// own step's ([`build_drainage`] keeps it), or the routing before a resampling
+    /// ([`sediment_carried`]).
+    pub carried: bool,
 }
 
 impl SurfaceFlux {
@@ -205,11 +337,33 @@ impl SurfaceFlux {
         self.sediment = SedimentBudget::default();
         self.pelagic_km3 = 0.0;
         self.coastal_km3 = 0.0;
+        self.pending = false;
+        self.carried = false;
+    }
+
+    /// Before the rivers or coasts add this step's erosion (`fresh`: on a network built this
+    /// step). On a later step of a network, the flux of its routing is cleared first and what
+    /// is eroded from then on is carried to the next routing. Returns whether the flux already
+    /// holds rock not laid down (what is added now must add to it).
+    pub fn open(&mut self, n: usize, fresh: bool) -> bool {
+        if self.eroded_km.len() != n || (!fresh && !self.pending) {
+            self.begin_step(n);
+            self.carried = !fresh;
+        }
+        std::mem::replace(&mut self.pending, true)
     }
     /// Volume deposited this step (sediment plus diffusion raising), km³.
     pub fn deposited_km3(&self) -> f64 {
         self.sediment.deposited_km3 + self.diffusion.raised_km3
     }
+}
+
+/// One step's cut by the rivers and slopes, per sample (see [`SurfaceFlux`]).
+#[derive(Default)]
+struct StepFlux {
+    eroded_km: Vec<f32>,
+    diffusion_km: Vec<f32>,
+    to_ocean_km3: Vec<f64>,
 }
 
 /// Scratch and cached state of the relief passes (a resource): the sample graph (built once per
@@ -223,8 +377,8 @@ pub struct ReliefState {
     iso_key: Option<(usize, u64)>,
     table: Option<(bool, u64, AgeDepthTable)>,
     spl: StreamPowerScratch,
-    /// What one more stream-power substep cut, km per sample (see [`erode_rivers`]).
-    spl_extra: Vec<f32>,
+    /// This step's cut when the flux already holds rock of earlier steps (see [`erode_rivers`]).
+    step_flux: StepFlux,
     diffusion: DiffusionScratch,
     router: SedimentRouter,
     sea: SeaMaskScratch,
@@ -255,7 +409,7 @@ impl ReliefState {
     /// the deflection).
     pub fn release_scratch(&mut self) {
         self.spl = StreamPowerScratch::default();
-        self.spl_extra = Vec::new();
+        self.step_flux = StepFlux::default();
         self.diffusion = DiffusionScratch::default();
         // The router's setting stays; only its buffers go.
         let max_overflows = self.router.max_overflows;
@@ -505,11 +659,13 @@ pub fn clear_climate(mut cs: ResMut<ClimateState>, mut rain: ResMut<Precipitatio
     }
 }
 
-/// Builds the drainage network of the current surface (phenomenon `drainage`).
+/// Builds the drainage network of the current surface (phenomenon `drainage`), on the steps of
+/// [`drainage_due`].
 #[allow(clippy::too_many_arguments)]
 pub fn build_drainage(
     params: Res<Params>,
     mesh: Res<SphereMesh>,
+    clock: Res<SimClock>,
     mut crust: ResMut<Crust>,
     mut state: ResMut<ReliefState>,
     mut network: ResMut<DrainageNetwork>,
@@ -525,11 +681,15 @@ pub fn build_drainage(
             finish_climate(cs, rain);
         }
     };
-    // The step's flux starts empty here, for every relief system after this one (they run
-    // only with the drainage on, and only on a network built this step).
+    // The flux starts empty here for the relief systems after this one (they run only on a
+    // built network), unless it carries what the rivers and coasts eroded on the steps since
+    // the last network: the sediment lays that down with this step's.
     let n = mesh.len();
-    flux.begin_step(n);
-    network.built = false;
+    if !(flux.carried && flux.pending && flux.eroded_km.len() == n) {
+        flux.begin_step(n);
+    }
+    flux.carried = false;
+    network.forget();
     if !pull(&mut crust, &mut gpu, FieldMask::ELEVATION) {
         finish(&mut rain);
         return;
@@ -546,21 +706,15 @@ pub fn build_drainage(
         finish(&mut rain);
         return;
     };
-    let mut ocean = std::mem::take(&mut network.drainage.ocean);
-    let t_sea = std::time::Instant::now();
-    sea_mask_with(
+    let network = &mut *network;
+    let sea_ms = route_network(
         g,
+        &params,
         &crust.elevation_km,
         &state.oceanic,
-        params.rivers.min_sea_area_km2,
-        &mut ocean,
+        &mut network.drainage,
         &mut state.sea,
     );
-    network.drainage.lake_area_ratio = lake_area_ratio(&params);
-    let sea_ms = t_sea.elapsed();
-    network
-        .drainage
-        .compute_routes(g, &crust.elevation_km, &ocean);
     let t_wait = std::time::Instant::now();
     finish(&mut rain);
     let wait = t_wait.elapsed();
@@ -568,6 +722,15 @@ pub fn build_drainage(
     let rain = rain.as_ref().map(|r| &r.0[..]).filter(|r| r.len() == n);
     network.drainage.compute_areas(g, rain);
     network.built = true;
+    network.built_step = clock.step;
+    // Kept while the network serves later steps, for a save to rebuild it.
+    if params.time.relief_interval_steps > 1 {
+        network.source = Some(NetworkSource {
+            elevation_km: crust.elevation_km.clone(),
+            oceanic: state.oceanic.clone(),
+            rain: rain.map(<[f32]>::to_vec).unwrap_or_default(),
+        });
+    }
     if let Some(t) = timings.as_mut() {
         t.record("drainage_sea_mask", sea_ms);
         t.record("drainage_climate_wait", wait);
@@ -578,15 +741,24 @@ pub fn build_drainage(
     }
 }
 
+/// After a resampling moved the samples: the network is forgotten (the next step builds one),
+/// and rock still carried from earlier steps is dropped (it is laid down before the resampling
+/// when the sediment is on: [`sediment_carried`]).
+pub fn forget_network(mut network: ResMut<DrainageNetwork>, mut flux: ResMut<SurfaceFlux>) {
+    network.forget();
+    flux.carried = false;
+}
+
 /// Stream-power incision and hillslope diffusion along the network (phenomenon `rivers`): the
-/// surface is lowered where rivers cut and slopes creep, and the crust thins by as much. Over
-/// k time steps at once (`time.relief_interval_steps`) the incision takes k substeps, with the
-/// rebound of [`substep_rebound`] between them (`isostasy_on`: whether the isostasy runs).
+/// surface is lowered where rivers cut and slopes creep, and the crust thins by as much. Every
+/// step, on the last network built (with `time.relief_interval_steps` above 1, one built on an
+/// earlier step: see [`drainage_due`]); the rock joins the [`SurfaceFlux`] still to be laid
+/// down.
 #[allow(clippy::too_many_arguments)]
 pub fn erode_rivers(
-    In(isostasy_on): In<bool>,
     params: Res<Params>,
     mesh: Res<SphereMesh>,
+    clock: Res<SimClock>,
     mut crust: ResMut<Crust>,
     mut state: ResMut<ReliefState>,
     network: Res<DrainageNetwork>,
@@ -613,7 +785,7 @@ pub fn erode_rivers(
             declared = g.can_declare_host_write(WRITES, crust.len(), tick);
         }
     }
-    let dt = relief_dt_my(&params);
+    let dt = params.time.time_step_my;
     let spl = stream_power_params(&params);
     let kappa = params.rivers.hillslope_diffusivity_km2_per_my;
     let state = &mut *state;
@@ -621,62 +793,39 @@ pub fn erode_rivers(
     let Some(g) = state.graph.as_ref() else {
         return;
     };
+    let n = g.len();
     let mut crust_res = crust;
     let crust = &mut *crust_res;
-    // Over k time steps at once (`time.relief_interval_steps`), the incision takes one implicit
-    // substep per time step on the same network: one implicit step of k·dt wears 12–17% less
-    // than k short ones (docs/performance.md), and mean land would rise with k. Between
-    // substeps the land cut rises by the local Airy rebound of what was cut, as the isostasy
-    // between two steps would raise it, so the next substep cuts as it would on the next step.
-    let substeps = params.time.relief_interval_steps.max(1);
-    let sub_dt = dt / substeps as f64;
-    let rebound = substep_rebound(&params, isostasy_on);
-    flux.incised_km3 = stream_power_erode(
+    // This step's cut goes straight into the flux when it holds nothing yet (every step with
+    // `time.relief_interval_steps` = 1), else into the step's own buffers and then added: the
+    // crust thins by this step's cut alone.
+    let add = flux.open(n, network.fresh(clock.step));
+    let mut own = add.then(|| {
+        let mut o = std::mem::take(&mut state.step_flux);
+        o.eroded_km.resize(n, 0.0);
+        o.diffusion_km.resize(n, 0.0);
+        o.to_ocean_km3.clear();
+        o.to_ocean_km3.resize(n, 0.0);
+        o
+    });
+    let (eroded_km, diffusion_km, to_ocean_km3) = match own.as_mut() {
+        Some(o) => (&mut o.eroded_km, &mut o.diffusion_km, &mut o.to_ocean_km3),
+        None => (
+            &mut flux.eroded_km,
+            &mut flux.diffusion_km,
+            &mut flux.to_ocean_km3,
+        ),
+    };
+    let mut incised_km3 = stream_power_erode(
         g,
         &network.drainage,
         &mut crust.elevation_km,
-        &mut flux.eroded_km,
+        eroded_km,
         None,
         &spl,
-        sub_dt,
+        dt,
         &mut state.spl,
     );
-    for s in 1..substeps {
-        // The rebound of the last substep's cut: the first's is in `eroded_km`, later ones'
-        // in `spl_extra`.
-        let last: &[f32] = if s == 1 {
-            &flux.eroded_km
-        } else {
-            &state.spl_extra
-        };
-        lift(&mut crust.elevation_km, last, rebound);
-        state.spl_extra.resize(g.len(), 0.0);
-        flux.incised_km3 += stream_power_erode(
-            g,
-            &network.drainage,
-            &mut crust.elevation_km,
-            &mut state.spl_extra,
-            None,
-            &spl,
-            sub_dt,
-            &mut state.spl,
-        );
-        flux.eroded_km
-            .par_iter_mut()
-            .zip(state.spl_extra.par_iter())
-            .with_min_len(8192)
-            .for_each(|(e, &x)| *e += x);
-        if s + 1 == substeps {
-            // Take back the lifts (all the cut but the last substep's): the surface ends lowered
-            // by what was cut, as the crust is thinned, and the isostasy floats it.
-            crust
-                .elevation_km
-                .par_iter_mut()
-                .zip(flux.eroded_km.par_iter().zip(state.spl_extra.par_iter()))
-                .with_min_len(8192)
-                .for_each(|(z, (&e, &x))| *z -= rebound * (e - x));
-        }
-    }
     // Background denudation: land loses k·min(z, cap) per My, added to the rock the rivers
     // carry.
     let k_den = params.rivers.denudation_per_my;
@@ -691,7 +840,7 @@ pub fn erode_rivers(
         let extra: f64 = crust
             .elevation_km
             .par_chunks_mut(CH)
-            .zip(flux.eroded_km.par_chunks_mut(CH))
+            .zip(eroded_km.par_chunks_mut(CH))
             .enumerate()
             .map(|(c, (zs, es))| {
                 let mut sum = 0.0f64;
@@ -710,7 +859,7 @@ pub fn erode_rivers(
             .collect::<Vec<f64>>()
             .iter()
             .sum();
-        flux.incised_km3 += extra;
+        incised_km3 += extra;
     }
     // Hillslope diffusion: on the device when the write is declared (the device then holds the
     // diffused elevation, and only the thickness goes up at the end), else on the CPU.
@@ -726,8 +875,8 @@ pub fn erode_rivers(
             &network.drainage.ocean,
             kappa,
             dt,
-            &mut flux.diffusion_km,
-            &mut flux.to_ocean_km3,
+            diffusion_km,
+            to_ocean_km3,
             &mut state.diffusion,
         ) {
             Ok(budget) => on_device = budget,
@@ -745,7 +894,7 @@ pub fn erode_rivers(
     } else {
         WRITES
     };
-    flux.diffusion = match on_device {
+    let budget = match on_device {
         Some(budget) => budget,
         None => diffuse_land(
             g,
@@ -753,69 +902,81 @@ pub fn erode_rivers(
             &network.drainage.ocean,
             kappa,
             dt,
-            &mut flux.diffusion_km,
-            &mut flux.to_ocean_km3,
+            diffusion_km,
+            to_ocean_km3,
             &mut state.diffusion,
         ),
     };
     crust
         .thickness_km
         .par_iter_mut()
-        .zip(flux.eroded_km.par_iter().zip(flux.diffusion_km.par_iter()))
+        .zip(eroded_km.par_iter().zip(diffusion_km.par_iter()))
         .with_min_len(8192)
         .for_each(|(t, (&e, &d))| *t += d - e);
-    flux.total_eroded_km3 += flux.eroded_km3();
-    flux.total_deposited_km3 += flux.diffusion.raised_km3;
+    if let Some(o) = own {
+        add_into(&mut flux.eroded_km, &o.eroded_km);
+        add_into(&mut flux.diffusion_km, &o.diffusion_km);
+        add_into(&mut flux.to_ocean_km3, &o.to_ocean_km3);
+        state.step_flux = o;
+    }
+    flux.total_eroded_km3 += incised_km3 + budget.lowered_km3;
+    flux.total_deposited_km3 += budget.raised_km3;
+    flux.incised_km3 += incised_km3;
+    flux.diffusion.add(&budget);
     after_write(&crust_res, &mut gpu, uploaded, declared);
 }
 
-/// The rebound between two substeps of the surface processes, as a fraction of what was cut:
-/// the local Airy rebound ρ_c/ρ_m (0.85 by default) with the isostasy on, 0 with it off.
-///
-/// With `time.relief_interval_steps = k` the rivers and coasts take k substeps in one run, but
-/// the isostasy, which derives the surface from the thickness, runs only after them. Between two
-/// steps it would raise the land by most of what was cut (the crust under it floats up), so
-/// the next cut starts from higher ground. The lift is taken back after the last substep: the
-/// surface ends lowered by what was cut, as the crust is thinned (as after k short steps'
-/// cuts), and the isostasy after the surface processes floats it. Without the isostasy nothing
-/// would raise the land between steps, so there is no lift. Tried and not kept: leaving the
-/// lifts in place (the sediment then sees the lifted surface); on seed 1 at 100k the land
-/// fraction fell 0.02 below an every-step run from 10 to 40 My, against within 0.003 with the
-/// lifts taken back (docs/relief.md).
-pub fn substep_rebound(params: &Params, isostasy_on: bool) -> f32 {
-    if isostasy_on {
-        (params.isostasy.crust_density_g_per_cm3 / params.isostasy.mantle_density_g_per_cm3) as f32
-    } else {
-        0.0
-    }
-}
-
-/// Raises each sample by `factor` times what `cut` says was cut there (the rebound between two
-/// stream-power substeps of [`erode_rivers`]).
-fn lift(elevation_km: &mut [f32], cut: &[f32], factor: f32) {
-    elevation_km
-        .par_iter_mut()
-        .zip(cut.par_iter())
+/// Adds `part` into `sum`, sample by sample.
+fn add_into<T: Copy + std::ops::AddAssign + Send + Sync>(sum: &mut [T], part: &[T]) {
+    sum.par_iter_mut()
+        .zip(part.par_iter())
         .with_min_len(8192)
-        .for_each(|(z, &c)| *z += factor * c);
+        .for_each(|(s, &p)| *s += p);
 }
 
-/// Lays down what the rivers and slopes carried (phenomenon `sediment`): in lakes, on the shelf,
-/// slope and rise, in trenches and basins; the crust thickens by the deposit. Subducting floor
-/// that went under its overriding plate since the last resampling takes none: it passes what
-/// reaches it on to the trench ([`SedimentRouter::passages_mut`]).
-#[allow(clippy::too_many_arguments)]
-pub fn deposit_sediment(
-    params: Res<Params>,
-    mesh: Res<SphereMesh>,
-    mut crust: ResMut<Crust>,
-    mut state: ResMut<ReliefState>,
-    network: Res<DrainageNetwork>,
-    mut flux: ResMut<SurfaceFlux>,
-    fronts: (Res<FrontPoints>, Res<ConvergenceField>),
-    mut gpu: Option<ResMut<GpuContext>>,
-    mut timings: Option<ResMut<StepTimings>>,
-) {
+/// What the sediment's routing reads and writes.
+#[derive(bevy_ecs::system::SystemParam)]
+pub struct SedimentRouting<'w> {
+    params: Res<'w, Params>,
+    mesh: Res<'w, SphereMesh>,
+    crust: ResMut<'w, Crust>,
+    state: ResMut<'w, ReliefState>,
+    network: Res<'w, DrainageNetwork>,
+    flux: ResMut<'w, SurfaceFlux>,
+    fp: Res<'w, FrontPoints>,
+    field: Res<'w, ConvergenceField>,
+    gpu: Option<ResMut<'w, GpuContext>>,
+    timings: Option<ResMut<'w, StepTimings>>,
+}
+
+/// Lays down what the rivers and slopes carried (phenomenon `sediment`, with each new network:
+/// [`sediment_due`]): in lakes, on the shelf, slope and rise, in trenches and basins; the crust
+/// thickens by the deposit. Subducting floor that went under its overriding plate since the last
+/// resampling takes none: it passes what reaches it on to the trench
+/// ([`SedimentRouter::passages_mut`]). The step's pelagic rain follows ([`PelagicRain`]).
+pub fn deposit_sediment(s: SedimentRouting) {
+    route_sediment(s, true);
+}
+
+/// [`deposit_sediment`] of the rock still carried before a resampling ([`sediment_carried`]),
+/// on the last network; the step's pelagic rain is laid already ([`lay_pelagic`]).
+pub fn deposit_carried_sediment(s: SedimentRouting) {
+    route_sediment(s, false);
+}
+
+fn route_sediment(s: SedimentRouting, with_pelagic: bool) {
+    let SedimentRouting {
+        params,
+        mesh,
+        mut crust,
+        mut state,
+        network,
+        mut flux,
+        fp,
+        field,
+        mut gpu,
+        mut timings,
+    } = s;
     let n = mesh.len();
     if !network.built || network.drainage.receiver.len() != n || flux.eroded_km.len() != n {
         return;
@@ -851,11 +1012,14 @@ pub fn deposit_sediment(
         &mesh,
         g,
         crust,
-        &fronts.0,
-        &fronts.1,
+        &fp,
+        &field,
         params.isostasy.trench_width_km,
         state.router.passages_mut(),
     );
+    // Rock eroded on earlier steps' networks (carried) may lie on samples this network puts on
+    // the other side of the coast: it enters the routing as this network sees them.
+    match_coast(&network.drainage.ocean, &g.area_km2, flux);
     flux.sediment = state.router.route(
         g,
         &network.drainage,
@@ -876,10 +1040,83 @@ pub fn deposit_sediment(
         .with_min_len(8192)
         .for_each(|(t, &d)| *t += d);
     flux.total_deposited_km3 += flux.sediment.deposited_km3;
-    // Pelagic rain (plankton shells, dust); it comes from the sea, not the land, so it is
-    // counted apart from the eroded-deposited balance.
+    flux.pending = false;
+    flux.carried = false;
+    flux.pelagic_km3 = 0.0;
+    if with_pelagic {
+        flux.pelagic_km3 = pelagic_rain(&params, crust, state, &network);
+    }
+    after_write(&crust_res, &mut gpu, FieldMask::THICKNESS, declared);
+}
+
+/// Moves the rock of `flux` recorded on the wrong side of the coast of `ocean` (eroded on a
+/// sample now at sea, or carried across the coast into a sample now land) to the other input
+/// of the router, at the same sample and with the same volume. Nothing moves when the flux was
+/// made on this network (the rivers and coasts cut only its land, and the slopes carry only
+/// into its sea).
+fn match_coast(ocean: &[bool], area_km2: &[f64], flux: &mut SurfaceFlux) {
+    let n = ocean.len();
+    if flux.eroded_km.len() != n || flux.to_ocean_km3.len() != n || area_km2.len() != n {
+        return;
+    }
+    flux.eroded_km
+        .par_iter_mut()
+        .zip(flux.to_ocean_km3.par_iter_mut())
+        .enumerate()
+        .with_min_len(8192)
+        .for_each(|(i, (e, v))| {
+            if ocean[i] {
+                if *e > 0.0 {
+                    *v += *e as f64 * area_km2[i];
+                    *e = 0.0;
+                }
+            } else if *v > 0.0 {
+                *e += (*v / area_km2[i].max(1e-12)) as f32;
+                *v = 0.0;
+            }
+        });
+}
+
+/// Pelagic rain (phenomenon `sediment`) on the steps without a routing of their own (the
+/// routing lays it on the others), on the last network's sea mask: see [`PelagicRain`]. It comes
+/// from the sea, not the land, so it is counted apart from the eroded–deposited balance
+/// ([`SurfaceFlux::pelagic_km3`]).
+pub fn lay_pelagic(
+    params: Res<Params>,
+    mut crust: ResMut<Crust>,
+    state: Res<ReliefState>,
+    network: Res<DrainageNetwork>,
+    mut flux: ResMut<SurfaceFlux>,
+    mut gpu: Option<ResMut<GpuContext>>,
+) {
+    flux.pelagic_km3 = 0.0;
+    if !network.built || network.drainage.ocean.len() != crust.len() {
+        return;
+    }
+    let reads = FieldMask(FieldMask::ELEVATION.0 | FieldMask::AGE.0);
+    let Some(declared) = before_write(&mut crust, &mut gpu, reads, FieldMask::THICKNESS) else {
+        return;
+    };
+    flux.pelagic_km3 = pelagic_rain(&params, &mut crust, &state, &network);
+    after_write(&crust, &mut gpu, FieldMask::THICKNESS, declared);
+}
+
+/// One step of pelagic rain on `crust` (see [`PelagicRain`]), km³.
+fn pelagic_rain(
+    params: &Params,
+    crust: &mut Crust,
+    state: &ReliefState,
+    network: &DrainageNetwork,
+) -> f64 {
+    let n = crust.len();
+    let Some(g) = state.graph.as_ref() else {
+        return 0.0;
+    };
+    if network.drainage.ocean.len() != n || state.oceanic.len() != n || g.len() != n {
+        return 0.0;
+    }
     let rain = PelagicRain {
-        layer_km: params.sediment.pelagic_rate_m_per_my * 1e-3 * relief_dt_my(&params),
+        layer_km: params.sediment.pelagic_rate_m_per_my * 1e-3 * params.time.time_step_my,
         max_age_my: params.sediment.pelagic_max_age_my as f32,
         min_depth_km: params.sediment.pelagic_min_depth_m * 1e-3,
     };
@@ -889,15 +1126,14 @@ pub fn deposit_sediment(
         age_my,
         ..
     } = crust;
-    flux.pelagic_km3 = rain.lay(
+    rain.lay(
         thickness_km,
         elevation_km,
         age_my,
         &state.oceanic,
         &network.drainage.ocean,
         &g.area_km2,
-    );
-    after_write(&crust_res, &mut gpu, FieldMask::THICKNESS, declared);
+    )
 }
 
 /// Pelagic rain (plankton shells, dust) over one step: a layer `layer_km` thick on every

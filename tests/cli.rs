@@ -519,7 +519,7 @@ fn bench_from_a_save_times_the_saved_planet() {
         .unwrap_or_else(|| panic!("no drainage time in:\n{stdout}"));
     assert!(drainage > 0.0, "{stdout}");
     assert!(
-        stdout.contains("surface processes every 1 steps"),
+        stdout.contains("a drainage network every 2 steps"),
         "{stdout}"
     );
     // `--relief-every` applies to the loaded planet.
@@ -531,7 +531,7 @@ fn bench_from_a_save_times_the_saved_planet() {
             "--resamplings",
             "0",
             "--relief-every",
-            "2",
+            "1",
         ])
         .arg("--from")
         .arg(&save)
@@ -544,7 +544,7 @@ fn bench_from_a_save_times_the_saved_planet() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(
-        stdout.contains("surface processes every 2 steps"),
+        stdout.contains("a drainage network every 1 steps"),
         "{stdout}"
     );
     fails_with(
@@ -671,15 +671,15 @@ fn init_flag_picks_the_start_method() {
     );
 }
 
-/// `--relief-every K` sets how often the surface processes run: 1 is the default (the same
-/// bytes as without the flag), 2 gives another planet, and 0 or 17 are refused with the
+/// `--relief-every K` sets how often the drainage network is built: 2 is the default (the same
+/// bytes as without the flag), 1 gives another planet, and 0 or 17 are refused with the
 /// parameter and its range named. Seen to fail with the flag parsed but not applied.
 #[test]
 fn relief_every_flag_sets_how_often_the_surface_processes_run() {
     let map = |k: Option<&str>| small_map("--relief-every", k, "20", "elevation16.png");
     let default = map(None);
-    assert_eq!(map(Some("1")), default, "1 is not the default");
-    assert_ne!(map(Some("2")), default, "--relief-every 2 changed nothing");
+    assert_eq!(map(Some("2")), default, "2 is not the default");
+    assert_ne!(map(Some("1")), default, "--relief-every 1 changed nothing");
     for bad in ["0", "17"] {
         let (o, _) = small_generate(
             &format!("relief-every-{bad}"),

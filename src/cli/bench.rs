@@ -238,7 +238,7 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
             .sum()
     };
     println!(
-        "  {:<26} {:>10.3} ms  (their means over the steps but the first; surface processes \
+        "  {:<26} {:>10.3} ms  (their means over the steps but the first; a drainage network \
          every {} steps)",
         "relief sets (mean a step)",
         relief_mean,

@@ -87,10 +87,10 @@ pub(crate) struct PlanetArgs {
     /// 2,500 km by default). Sets `init.craters`.
     #[arg(long)]
     pub(crate) craters: Option<u64>,
-    /// Run the surface processes (climate, drainage, rivers, coasts, sediment) on one step in K,
-    /// over K steps at once (1 to 16; 1, every step, is the default). K = 2 builds the default
-    /// planet in about four fifths of the time, with more lakes and somewhat higher land
-    /// (docs/relief.md). Sets `time.relief_interval_steps`.
+    /// Build the climate and the drainage network on one step in K (1 to 16; 2 is the default),
+    /// the sediment laying down with each new network what the rivers and coasts, which run
+    /// every step on the last network, eroded since. 1 builds them every step, a little slower
+    /// for the same relief (docs/relief.md). Sets `time.relief_interval_steps`.
     #[arg(long, value_name = "K")]
     pub(crate) relief_every: Option<u64>,
     #[command(flatten)]

@@ -402,7 +402,11 @@ impl Simulation {
         if let Some(mut c) = world.get_resource_mut::<crate::systems::relief::ClimateState>() {
             c.release_scratch();
         }
-        if let Some(mut n) = world.get_resource_mut::<crate::systems::relief::DrainageNetwork>() {
+        // A network that serves later steps (`time.relief_interval_steps` above 1) is state, not
+        // scratch: it stays.
+        if let Some(mut n) = world.get_resource_mut::<crate::systems::relief::DrainageNetwork>()
+            && n.source.is_none()
+        {
             n.drainage = Default::default();
             n.built = false;
         }

@@ -205,7 +205,7 @@ define_params! {
     /// Time stepping.
     [time] Time {
         time_step_my: f64 = 2.0, 0.1..=10.0, "My", "Time step δt (paper Appendix A).";
-        relief_interval_steps: u64 = 1, 1..=16, "steps", "The surface processes (climate, drainage, rivers, coasts, sediment) run every this many steps, over that many time steps at once: the rivers and coasts take one substep per time step on the same network, the land they cut rising by its local Airy rebound between substeps (as the isostasy would raise it between steps); the climate, drainage and sediment run once. The tectonics and the isostasy run every step. 1 (the default): every step. 2 takes about two thirds of the relief sets' time, with 20–100 m more mean land and more lakes (docs/relief.md).";
+        relief_interval_steps: u64 = 2, 1..=16, "steps", "The climate and the drainage network are built again every this many steps (and on the step after each resampling), and the sediment lays down, with each new network, the rock eroded since the last one. The rivers and coasts wear the land every step, on the last network. 2 (the default) takes about four fifths of the relief sets' time of 1 (every step) for the same relief within Earth's bands, with slightly more lakes (docs/relief.md).";
     }
     /// Initial planet state.
     [init] Init {

@@ -208,24 +208,55 @@ pub fn coastal_erosion(
     volume
 }
 
-/// The sea mask the coasts see on a step after their network's (with
-/// `time.relief_interval_steps` above 1): the network's sea, and every land sample at or below
-/// sea level beside it, which a network built now would put at sea. The coasts can so retreat
-/// past the samples they cut down on the step before, as they do with a network every step.
-pub fn refresh_sea(g: &ReliefGraph, ocean: &[bool], elevation_km: &[f32], sea: &mut Vec<bool>) {
+/// The sea mask of a step after its network's (with `time.relief_interval_steps` above 1), for
+/// the rivers, the hillslopes and the coasts: the samples at or below sea level joined to the
+/// network's sea through samples at or below sea level. A network built now would put those at
+/// sea (the bodies of water too small to be sea aside); the samples of its sea that rose above
+/// sea level since are land. So the coasts retreat past the samples they cut down on the step
+/// before, and the rivers and slopes end at the sea where it now is, as with a network every
+/// step. `frontier` is scratch.
+pub fn refresh_sea(
+    g: &ReliefGraph,
+    ocean: &[bool],
+    elevation_km: &[f32],
+    sea: &mut Vec<bool>,
+    frontier: &mut Vec<u32>,
+) {
     let n = g.len();
+    let wet = |i: usize| elevation_km[i] <= 0.0;
     sea.clear();
-    sea.par_extend((0..n).into_par_iter().with_min_len(8192).map(|i| {
-        ocean[i] || (elevation_km[i] <= 0.0 && g.neighbors_of(i).iter().any(|&j| ocean[j as usize]))
+    sea.par_extend(
+        (0..n)
+            .into_par_iter()
+            .with_min_len(8192)
+            .map(|i| ocean[i] && wet(i)),
+    );
+    // Sunk land beside the sea, then what is joined to it (few samples: breadth first).
+    frontier.clear();
+    frontier.par_extend((0..n).into_par_iter().with_min_len(8192).filter_map(|i| {
+        (!ocean[i] && wet(i) && g.neighbors_of(i).iter().any(|&j| sea[j as usize]))
+            .then_some(i as u32)
     }));
+    for &i in frontier.iter() {
+        sea[i as usize] = true;
+    }
+    while let Some(i) = frontier.pop() {
+        for &j in g.neighbors_of(i as usize) {
+            if !sea[j as usize] && wet(j as usize) {
+                sea[j as usize] = true;
+                frontier.push(j);
+            }
+        }
+    }
 }
 
 /// State of the coastal erosion system (scratch only).
 #[derive(Resource, Default)]
 pub struct CoastState {
     scratch: CoastScratch,
-    /// The refreshed sea mask (see [`refresh_sea`]).
+    /// The refreshed sea mask (see [`refresh_sea`]) and its scratch.
     sea: Vec<bool>,
+    frontier: Vec<u32>,
 }
 
 /// The coastal-erosion constants of `params`.
@@ -276,7 +307,13 @@ pub fn erode_coasts(
     let ocean = if fresh {
         &network.drainage.ocean
     } else {
-        refresh_sea(g, &network.drainage.ocean, &crust.elevation_km, &mut sea);
+        refresh_sea(
+            g,
+            &network.drainage.ocean,
+            &crust.elevation_km,
+            &mut sea,
+            &mut state.frontier,
+        );
         &sea
     };
     let volume = coastal_erosion(
@@ -424,7 +461,7 @@ mod tests {
             let mut sea = Vec::new();
             for step in 0..2 {
                 let mask = if step > 0 && refresh {
-                    refresh_sea(&g, &ocean, &z, &mut sea);
+                    refresh_sea(&g, &ocean, &z, &mut sea, &mut Vec::new());
                     &sea
                 } else {
                     &ocean

@@ -63,7 +63,7 @@ use self::drainage::{Drainage, SeaMaskScratch, sea_mask_with};
 use self::graph::ReliefGraph;
 use self::isostasy::{AgeDepthLaw, AgeDepthTable, IsostasyParams, RegionalIsostasy, isostasy_cpu};
 use self::sediment::{SedimentBudget, SedimentParams, SedimentRouter};
-use self::stream_power::{StreamPowerParams, StreamPowerScratch, stream_power_erode};
+use self::stream_power::{StreamPowerParams, StreamPowerScratch, stream_power_erode_to};
 use crate::components::{Plate, PlateBounds, PlateFrame, PlateMotion, PlateStats};
 use crate::geometry::SphereMesh;
 use crate::gpu::isostasy::isostasy_dispatch;
@@ -74,33 +74,24 @@ use crate::resources::{
     ConvergenceField, Crust, CrustType, FrontPoints, PlateTable, SimClock, StepTimings,
 };
 
-/// Whether `step` is one of the steps of the drainage, climate and sediment: the first step and
-/// then every `time.relief_interval_steps`-th, counted from the start of the run (so a resumed
-/// save keeps the same steps).
-fn on_relief_step(step: u64, params: &Params) -> bool {
-    step.is_multiple_of(params.time.relief_interval_steps.max(1))
-}
-
-/// Run condition: this is one of the steps of the drainage, climate and sediment (see
-/// [`drainage_due`]; every step with `time.relief_interval_steps` = 1, the default).
-pub fn relief_due(clock: Res<SimClock>, params: Res<Params>) -> bool {
-    on_relief_step(clock.step, &params)
-}
-
-/// Run condition of the climate and the drainage: on one step in `time.relief_interval_steps`
-/// ([`relief_due`]), and on any step without a network to follow (the first, the one after a
-/// resampling, the one after the drainage was switched on). The rivers and coasts run every step,
-/// on the last network built; the sediment runs with each new network ([`sediment_due`]).
+/// Run condition of the climate and the drainage: when no network is there to follow (the first
+/// step, the one after a resampling, the one after the drainage was switched on), and when the
+/// last one was built `time.relief_interval_steps` steps ago (every step at 1, the default). The
+/// rivers and coasts run every step, on the last network built; the sediment runs with each new
+/// network ([`sediment_due`]). Counted from the last network, not from the start of the run: a
+/// network built after a resampling serves its k steps too.
 pub fn drainage_due(
     clock: Res<SimClock>,
     params: Res<Params>,
     network: Option<Res<DrainageNetwork>>,
 ) -> bool {
+    let k = params.time.relief_interval_steps.max(1);
+    let Some(net) = network.filter(|n| n.built) else {
+        return true;
+    };
     // A network built without its source (before `time.relief_interval_steps` was raised above
     // 1) cannot go into a save: it is built again.
-    let k = params.time.relief_interval_steps;
-    on_relief_step(clock.step, &params)
-        || !network.is_some_and(|n| n.built && (k <= 1 || n.source.is_some()))
+    clock.step >= net.built_step.saturating_add(k) || (k > 1 && net.source.is_none())
 }
 
 /// Run condition of the sediment's routing: the drainage built the network this step. It lays
@@ -379,6 +370,10 @@ pub struct ReliefState {
     spl: StreamPowerScratch,
     /// This step's cut when the flux already holds rock of earlier steps (see [`erode_rivers`]).
     step_flux: StepFlux,
+    /// The sea the rivers and slopes see on a later step of the network (see
+    /// [`coast::refresh_sea`]), and its scratch.
+    sea_now: Vec<bool>,
+    frontier: Vec<u32>,
     diffusion: DiffusionScratch,
     router: SedimentRouter,
     sea: SeaMaskScratch,
@@ -410,6 +405,8 @@ impl ReliefState {
     pub fn release_scratch(&mut self) {
         self.spl = StreamPowerScratch::default();
         self.step_flux = StepFlux::default();
+        self.sea_now = Vec::new();
+        self.frontier = Vec::new();
         self.diffusion = DiffusionScratch::default();
         // The router's setting stays; only its buffers go.
         let max_overflows = self.router.max_overflows;
@@ -799,7 +796,22 @@ pub fn erode_rivers(
     // This step's cut goes straight into the flux when it holds nothing yet (every step with
     // `time.relief_interval_steps` = 1), else into the step's own buffers and then added: the
     // crust thins by this step's cut alone.
-    let add = flux.open(n, network.fresh(clock.step));
+    let fresh = network.fresh(clock.step);
+    let add = flux.open(n, fresh);
+    // On a later step of the network, the slopes see the sea where it is now.
+    let mut sea_now = std::mem::take(&mut state.sea_now);
+    let ocean = if fresh {
+        &network.drainage.ocean
+    } else {
+        coast::refresh_sea(
+            g,
+            &network.drainage.ocean,
+            &crust.elevation_km,
+            &mut sea_now,
+            &mut state.frontier,
+        );
+        &sea_now
+    };
     let mut own = add.then(|| {
         let mut o = std::mem::take(&mut state.step_flux);
         o.eroded_km.resize(n, 0.0);
@@ -816,9 +828,10 @@ pub fn erode_rivers(
             &mut flux.to_ocean_km3,
         ),
     };
-    let mut incised_km3 = stream_power_erode(
+    let mut incised_km3 = stream_power_erode_to(
         g,
         &network.drainage,
+        ocean,
         &mut crust.elevation_km,
         eroded_km,
         None,
@@ -830,7 +843,6 @@ pub fn erode_rivers(
     // carry.
     let k_den = params.rivers.denudation_per_my;
     if k_den > 0.0 {
-        let ocean = &network.drainage.ocean;
         let factor = (1.0 - (-k_den * dt).exp()) as f32;
         let den_cap = params.rivers.denudation_cap_km as f32;
         let area = &g.area_km2;
@@ -872,7 +884,7 @@ pub fn erode_rivers(
             ctx,
             g,
             &mut crust.elevation_km,
-            &network.drainage.ocean,
+            ocean,
             kappa,
             dt,
             diffusion_km,
@@ -899,7 +911,7 @@ pub fn erode_rivers(
         None => diffuse_land(
             g,
             &mut crust.elevation_km,
-            &network.drainage.ocean,
+            ocean,
             kappa,
             dt,
             diffusion_km,
@@ -919,6 +931,7 @@ pub fn erode_rivers(
         add_into(&mut flux.to_ocean_km3, &o.to_ocean_km3);
         state.step_flux = o;
     }
+    state.sea_now = sea_now;
     flux.total_eroded_km3 += incised_km3 + budget.lowered_km3;
     flux.total_deposited_km3 += budget.raised_km3;
     flux.incised_km3 += incised_km3;

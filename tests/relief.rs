@@ -2475,3 +2475,75 @@ fn rivers_build_their_plains_to_the_graded_slope() {
     );
     assert_eq!(b0.plains_km3, 0.0);
 }
+
+/// On a step after its network's, land that sank below sea level beside the network's sea is sea
+/// again for the rivers ([`refresh_sea`], [`stream_power_erode_to`]): they cut the land draining
+/// to it down to sea level, never below, where on the network's own sea they would follow the
+/// sunk land's floor below it. The network's sea risen above sea level is land.
+#[test]
+fn rivers_end_at_the_sea_where_it_now_is() {
+    use tectonic_planets::systems::relief::coast::refresh_sea;
+    use tectonic_planets::systems::relief::stream_power::stream_power_erode_to;
+    let mesh = SphereMesh::fibonacci(4_000, 0.3, 1, RADIUS_KM).expect("mesh");
+    let g = relief_graph(&mesh);
+    let n = g.len();
+    let x = |i: usize| mesh.positions[i].x as f32;
+    // Sea where x < 0, land rising from the coast.
+    let z0: Vec<f32> = (0..n)
+        .map(|i| if x(i) < 0.0 { -3.0 } else { 0.2 + 2.0 * x(i) })
+        .collect();
+    let oceanic: Vec<bool> = (0..n).map(|i| x(i) < 0.0).collect();
+    let mut ocean = Vec::new();
+    sea_mask(&g, &z0, &oceanic, 0.0, &mut ocean);
+    let mut d = Drainage::new();
+    d.compute(&g, &z0, &ocean, None);
+    // Since the network: the coastal band sank 400 m, a strip of the sea rose above it.
+    let band = |i: usize| x(i) >= 0.0 && x(i) < 0.15;
+    let risen = |i: usize| x(i) < 0.0 && x(i) > -0.05;
+    let z1: Vec<f32> = (0..n)
+        .map(|i| {
+            if band(i) {
+                z0[i] - 0.4
+            } else if risen(i) {
+                0.3
+            } else {
+                z0[i]
+            }
+        })
+        .collect();
+    let mut sea = Vec::new();
+    refresh_sea(&g, &ocean, &z1, &mut sea, &mut Vec::new());
+    assert!(
+        (0..n).any(|i| band(i) && z1[i] <= 0.0 && sea[i]),
+        "no sunk land at sea"
+    );
+    assert!(
+        (0..n).all(|i| !(risen(i) && sea[i])),
+        "risen floor left at sea"
+    );
+    let p = StreamPowerParams {
+        k: 50.0,
+        ..StreamPowerParams::default()
+    };
+    let cut = |sea: &[bool]| {
+        let (mut z, mut e) = (z1.clone(), vec![0.0f32; n]);
+        stream_power_erode_to(
+            &g,
+            &d,
+            sea,
+            &mut z,
+            &mut e,
+            None,
+            &p,
+            2.0,
+            &mut Default::default(),
+        );
+        // Land above the sea before the step that ended below it.
+        (0..n).filter(|&i| z1[i] > 0.0 && z[i] < -1e-6).count()
+    };
+    assert_eq!(cut(&sea), 0, "rivers cut below the sea where it now is");
+    assert!(
+        cut(&ocean) > 0,
+        "the network's own sea cut nothing below sea level: the test tests nothing"
+    );
+}

@@ -119,7 +119,7 @@ pub fn stream_power_erode(
 /// [`super::coast::refresh_sea`]): a receiver now at sea is the base level 0; one the network
 /// put at sea that rose above it since is its own height. Without the first, land that sank
 /// below sea level since the network was built (the isostasy, a falling margin) would take the
-/// rivers draining to it below the sea: on the default planet's second step the land fraction
+/// rivers draining to it below the sea: on the second step of seed 1 at 100k the land fraction
 /// fell from 0.237 to 0.205.
 #[allow(clippy::too_many_arguments)]
 pub fn stream_power_erode_to(

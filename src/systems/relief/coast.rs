@@ -254,9 +254,6 @@ pub fn refresh_sea(
 #[derive(Resource, Default)]
 pub struct CoastState {
     scratch: CoastScratch,
-    /// The refreshed sea mask (see [`refresh_sea`]) and its scratch.
-    sea: Vec<bool>,
-    frontier: Vec<u32>,
 }
 
 /// The coastal-erosion constants of `params`.
@@ -280,7 +277,7 @@ pub fn erode_coasts(
     mesh: Res<SphereMesh>,
     clock: Res<SimClock>,
     mut crust: ResMut<Crust>,
-    relief: Res<ReliefState>,
+    mut relief: ResMut<ReliefState>,
     mut state: ResMut<CoastState>,
     network: Res<DrainageNetwork>,
     mut flux: ResMut<SurfaceFlux>,
@@ -294,6 +291,7 @@ pub fn erode_coasts(
     let Some(declared) = super::before_write(&mut crust, &mut gpu, FieldMask::NONE, WRITES) else {
         return;
     };
+    let relief = &mut *relief;
     let Some(g) = relief.graph.as_ref() else {
         return;
     };
@@ -303,7 +301,8 @@ pub fn erode_coasts(
     let crust = &mut *crust_res;
     let fresh = network.fresh(clock.step);
     flux.open(n, fresh);
-    let mut sea = std::mem::take(&mut state.sea);
+    // The relief state's buffers for the sea as it is now (the rivers' before this).
+    let mut sea = std::mem::take(&mut relief.sea_now);
     let ocean = if fresh {
         &network.drainage.ocean
     } else {
@@ -312,7 +311,7 @@ pub fn erode_coasts(
             &network.drainage.ocean,
             &crust.elevation_km,
             &mut sea,
-            &mut state.frontier,
+            &mut relief.frontier,
         );
         &sea
     };
@@ -326,7 +325,7 @@ pub fn erode_coasts(
         params.time.time_step_my,
         &mut state.scratch,
     );
-    state.sea = sea;
+    relief.sea_now = sea;
     flux.coastal_km3 += volume;
     flux.total_eroded_km3 += volume;
     super::after_write(&crust_res, &mut gpu, WRITES, declared);

@@ -370,7 +370,7 @@ pub struct ReliefState {
     spl: StreamPowerScratch,
     /// This step's cut when the flux already holds rock of earlier steps (see [`erode_rivers`]).
     step_flux: StepFlux,
-    /// The sea the rivers and slopes see on a later step of the network (see
+    /// The sea the rivers, slopes and coasts see on a later step of the network (see
     /// [`coast::refresh_sea`]), and its scratch.
     sea_now: Vec<bool>,
     frontier: Vec<u32>,

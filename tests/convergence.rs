@@ -823,3 +823,93 @@ fn an_arc_driven_into_a_continent_docks() {
         b1 - b0
     );
 }
+
+/// The front distances propagated plate by plate in parallel are the bits of the one search over
+/// the whole mesh: irregular plates, several seeds per plate (some on another plate's samples,
+/// which reach nothing), labels whose origins lie off the mesh, and plates with no seed.
+#[test]
+fn distances_propagated_plate_by_plate_match_the_whole_mesh_search() {
+    use tectonic_planets::systems::convergence::{propagate_nearest, propagate_nearest_grouped};
+    let mesh = SphereMesh::fibonacci(30_000, 0.3, 5, 6371.0).unwrap();
+    let n = mesh.len();
+    // Nine plates cut by three tilted planes and wobbling with longitude.
+    let planes = [
+        DVec3::new(0.3, 0.9, 0.1).normalize(),
+        DVec3::new(-0.7, 0.2, 0.6).normalize(),
+        DVec3::new(0.5, -0.4, 0.8).normalize(),
+    ];
+    let plate: Vec<u32> = mesh
+        .positions
+        .iter()
+        .map(|p| {
+            let w = 0.15 * (5.0 * p.y.atan2(p.x)).sin();
+            planes
+                .iter()
+                .enumerate()
+                .map(|(k, nrm)| u32::from(nrm.dot(*p) + w > 0.0) << k)
+                .sum::<u32>()
+                + 3
+        })
+        .collect();
+    // Seeds: every 97th sample, with a label whose plate is the sample's own for most, and
+    // another's for every fifth; label origins nudged off the sample.
+    let mut seeds = Vec::new();
+    let mut label_plate = Vec::new();
+    let mut origins = Vec::new();
+    for (k, i) in (0..n).step_by(97).enumerate() {
+        let own = plate[i];
+        let lp = if k % 5 == 4 { own ^ 1 } else { own };
+        // Plate 3 + 7 = 10 never gets a label.
+        if lp == 10 {
+            continue;
+        }
+        let l = label_plate.len() as u32;
+        label_plate.push(lp);
+        origins.push((mesh.positions[i] + DVec3::new(1e-3, -2e-3, 5e-4)).normalize());
+        seeds.push((i as u32, l));
+        if k % 3 == 0 {
+            seeds.push((((i + 1) % n) as u32, l));
+        }
+    }
+    let max_rad = 900.0 / 6371.0;
+    let (mut d_all, mut l_all) = (vec![f32::INFINITY; n], vec![u32::MAX; n]);
+    propagate_nearest(
+        &mesh,
+        &seeds,
+        |l| origins[l as usize],
+        |s, l| plate[s] == label_plate[l as usize],
+        max_rad,
+        &mut d_all,
+        &mut l_all,
+        &mut Vec::new(),
+    );
+    let (mut d_grp, mut l_grp) = (vec![f32::INFINITY; n], vec![u32::MAX; n]);
+    propagate_nearest_grouped(
+        &mesh,
+        &seeds,
+        |l| origins[l as usize],
+        &plate,
+        |l| label_plate[l as usize],
+        max_rad,
+        &mut d_grp,
+        &mut l_grp,
+    );
+    let reached = d_all.iter().filter(|d| d.is_finite()).count();
+    assert!(
+        reached > n / 2 && reached < n,
+        "the test should reach most samples but not all: {reached} of {n}"
+    );
+    let plates_reached: std::collections::BTreeSet<u32> = (0..n)
+        .filter(|&i| d_all[i].is_finite())
+        .map(|i| plate[i])
+        .collect();
+    assert!(plates_reached.len() >= 6, "{plates_reached:?}");
+    for i in 0..n {
+        assert_eq!(
+            (d_grp[i].to_bits(), l_grp[i]),
+            (d_all[i].to_bits(), l_all[i]),
+            "sample {i} (plate {})",
+            plate[i]
+        );
+    }
+}

@@ -314,7 +314,10 @@ pub fn run_after_resample(world: &mut World) {
     world
         .resource_mut::<StepTimings>()
         .record("after_resample", t_after.elapsed());
-    resample::release_free_memory();
+    {
+        let _t = crate::systems::DebugTimer::new("release_free_memory");
+        resample::release_free_memory();
+    }
 }
 
 /// A schedule of the step: one thread, and any ambiguity (two unordered systems touching the

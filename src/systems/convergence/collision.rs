@@ -439,6 +439,7 @@ fn exchange_momentum(world: &mut World, applied: &[(Suture, Vec<u32>)], params: 
 
 /// After a resampling that applied sutures: the collision surge around each sutured terrane.
 pub fn collision_uplift(world: &mut World) {
+    let _t = crate::systems::DebugTimer::new("collision_uplift");
     let applied = std::mem::take(&mut world.resource_mut::<Sutures>().applied);
     if !applied.is_empty() {
         world.resource_mut::<Sutures>().last_applied =

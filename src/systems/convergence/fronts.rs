@@ -7,7 +7,7 @@ use bevy_ecs::prelude::*;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::propagate_nearest;
+use super::propagate_nearest_grouped;
 use crate::components::{
     FrontKind, Plate, PlateBounds, PlateFrame, PlateId, PlateMotion, PlateStats, SubductionFront,
 };
@@ -240,27 +240,27 @@ pub fn build_fronts(world: &mut World) {
         let fp = &fp;
         rayon::join(
             || {
-                propagate_nearest(
+                propagate_nearest_grouped(
                     mesh,
                     &over_seeds,
                     origin,
-                    |s, l| crust.plate[s] == fp.overriding[l as usize],
+                    &crust.plate,
+                    |l| fp.overriding[l as usize],
                     params.subduction.distance_km / r_km,
                     overriding_distance_km,
                     overriding_point,
-                    &mut Vec::new(),
                 )
             },
             || {
-                propagate_nearest(
+                propagate_nearest_grouped(
                     mesh,
                     &sub_seeds,
                     origin,
-                    |s, l| crust.plate[s] == fp.subducting[l as usize],
+                    &crust.plate,
+                    |l| fp.subducting[l as usize],
                     sub_limit,
                     subducting_distance_km,
                     subducting_point,
-                    &mut Vec::new(),
                 )
             },
         );
@@ -312,6 +312,7 @@ pub fn track_fronts(t: FrontTracking) {
 /// inactive until then), which are active and what lies under them, for what reads them before
 /// the next step (the isostasy's trench, see `AfterResampleSystems::Relief`).
 pub fn refresh_fronts(t: FrontTracking) {
+    let _t = crate::systems::DebugTimer::new("refresh_fronts");
     track_fronts_over(0.0, t);
 }
 

@@ -72,8 +72,125 @@ pub fn propagate_nearest(
 ) {
     settled.clear();
     settled.resize(mesh.len(), false);
+    propagate_core(
+        mesh,
+        seeds,
+        &origin,
+        &allowed,
+        |i| i,
+        max_rad,
+        dist_rad,
+        label,
+        settled,
+    );
+    chords_to_angles(dist_rad);
+}
+
+/// [`propagate_nearest`] for samples and labels that fall in groups (plates) that never reach
+/// one another: label `l` reaches sample `s` only when `group_of_sample[s] ==
+/// group_of_label(l)`. Each group with seeds runs on arrays of its own, the groups in parallel;
+/// the distances and labels are the same bits as [`propagate_nearest`]'s with `allowed` that
+/// test (a group's searches read and write only its own samples, in the same order).
+#[allow(clippy::too_many_arguments)]
+pub fn propagate_nearest_grouped(
+    mesh: &SphereMesh,
+    seeds: &[(u32, u32)],
+    origin: impl Fn(u32) -> DVec3 + Sync,
+    group_of_sample: &[u32],
+    group_of_label: impl Fn(u32) -> u32 + Sync,
+    max_rad: f64,
+    dist_rad: &mut [f32],
+    label: &mut [u32],
+) {
+    let n = mesh.len().min(group_of_sample.len());
+    // Each group's seeds, in their order; groups numbered in order of first seed.
+    let mut slot_of_group: std::collections::HashMap<u32, usize> = Default::default();
+    let mut groups: Vec<(u32, Vec<(u32, u32)>)> = Vec::new();
+    for &(s, l) in seeds {
+        let g = group_of_label(l);
+        let k = *slot_of_group.entry(g).or_insert_with(|| {
+            groups.push((g, Vec::new()));
+            groups.len() - 1
+        });
+        groups[k].1.push((s, l));
+    }
+    // The members of each group with seeds, in sample order, and each sample's place there.
+    const NO_SLOT: u32 = u32::MAX;
+    let slot: Vec<u32> = group_of_sample[..n]
+        .par_iter()
+        .with_min_len(8192)
+        .map(|g| slot_of_group.get(g).map_or(NO_SLOT, |&k| k as u32))
+        .collect();
+    let mut members: Vec<Vec<u32>> = vec![Vec::new(); groups.len()];
+    let mut local = vec![0u32; n];
+    for (i, &k) in slot.iter().enumerate() {
+        if k != NO_SLOT {
+            let m = &mut members[k as usize];
+            local[i] = m.len() as u32;
+            m.push(i as u32);
+        }
+    }
+    let (origin, group_of_sample, local_ref) = (&origin, &group_of_sample[..n], &local);
+    let (dist_in, label_in) = (&*dist_rad, &*label);
+    // Largest groups first, so that the last tasks are small.
+    let mut order: Vec<usize> = (0..groups.len()).collect();
+    order.sort_by_key(|&k| std::cmp::Reverse(members[k].len()));
+    let mut results: Vec<(usize, Vec<f32>, Vec<u32>)> = order
+        .par_iter()
+        .map(|&k| {
+            let (g, ref group_seeds) = groups[k];
+            let mem = &members[k];
+            let mut d: Vec<f32> = mem.iter().map(|&i| dist_in[i as usize]).collect();
+            let mut lab: Vec<u32> = mem.iter().map(|&i| label_in[i as usize]).collect();
+            let mut settled = vec![false; mem.len()];
+            propagate_core(
+                mesh,
+                group_seeds,
+                origin,
+                &|s: usize, _l: u32| group_of_sample[s] == g,
+                |i| local_ref[i] as usize,
+                max_rad,
+                &mut d,
+                &mut lab,
+                &mut settled,
+            );
+            (k, d, lab)
+        })
+        .collect();
+    results.sort_unstable_by_key(|r| r.0);
+    let results = &results;
+    dist_rad[..n]
+        .par_iter_mut()
+        .zip(label[..n].par_iter_mut())
+        .enumerate()
+        .with_min_len(8192)
+        .for_each(|(i, (d, l))| {
+            let k = slot[i];
+            if k != NO_SLOT {
+                let (_, ref ds, ref ls) = results[k as usize];
+                *d = ds[local_ref[i] as usize];
+                *l = ls[local_ref[i] as usize];
+            }
+        });
+    chords_to_angles(dist_rad);
+}
+
+/// The search of [`propagate_nearest`] with chords for distances: sample `i`'s distance, label
+/// and settled flag at index `at(i)` of `dist`, `label` and `settled`.
+#[allow(clippy::too_many_arguments)]
+fn propagate_core(
+    mesh: &SphereMesh,
+    seeds: &[(u32, u32)],
+    origin: &impl Fn(u32) -> DVec3,
+    allowed: &impl Fn(usize, u32) -> bool,
+    at: impl Fn(usize) -> usize,
+    max_rad: f64,
+    dist: &mut [f32],
+    label: &mut [u32],
+    settled: &mut [bool],
+) {
     // Ordered by chord length (monotone in the great-circle angle, and much cheaper). While the
-    // search runs, `dist_rad` holds the best chord offered so far (a worse offer is not queued)
+    // search runs, `dist` holds the best chord offered so far (a worse offer is not queued)
     // and `label` its front point; chords become angles at the end.
     let chord = |a: DVec3, b: DVec3| (a - b).length();
     let max_chord = 2.0 * (0.5 * max_rad.min(std::f64::consts::PI)).sin();
@@ -86,12 +203,12 @@ pub fn propagate_nearest(
                  c: f64,
                  node: u32,
                  l: u32| {
-        let n = node as usize;
-        if c > max_chord || (c as f32) >= dist[n] {
+        let a = at(node as usize);
+        if c > max_chord || (c as f32) >= dist[a] {
             return;
         }
-        dist[n] = c as f32;
-        lab[n] = l;
+        dist[a] = c as f32;
+        lab[a] = l;
         let b = ((c / width) as usize).max(cur);
         if b >= buckets.len() {
             buckets.resize_with(b + 1, Vec::new);
@@ -101,7 +218,7 @@ pub fn propagate_nearest(
     for &(s, l) in seeds {
         if allowed(s as usize, l) {
             let c = chord(mesh.positions[s as usize], origin(l));
-            offer(&mut buckets, dist_rad, label, 0, c, s, l);
+            offer(&mut buckets, dist, label, 0, c, s, l);
         }
     }
     let mut cur = 0;
@@ -111,24 +228,29 @@ pub fn propagate_nearest(
             let (node, l, c) = buckets[cur][k];
             k += 1;
             let n = node as usize;
-            if settled[n] || label[n] != l || c > dist_rad[n] {
+            let a = at(n);
+            if settled[a] || label[a] != l || c > dist[a] {
                 continue; // settled already, or a better offer came later
             }
-            settled[n] = true;
+            settled[a] = true;
             let o = origin(l);
             for &h in mesh.neighbors_of(n) {
                 let h = h as usize;
-                if settled[h] || !allowed(h, l) {
+                if !allowed(h, l) || settled[at(h)] {
                     continue;
                 }
                 let c = chord(mesh.positions[h], o);
-                offer(&mut buckets, dist_rad, label, cur, c, h as u32, l);
+                offer(&mut buckets, dist, label, cur, c, h as u32, l);
             }
         }
         buckets[cur] = Vec::new();
         cur += 1;
     }
-    dist_rad.par_iter_mut().with_min_len(4096).for_each(|d| {
+}
+
+/// Turns the finite chords of `dist` into great-circle angles (radians).
+fn chords_to_angles(dist: &mut [f32]) {
+    dist.par_iter_mut().with_min_len(4096).for_each(|d| {
         if d.is_finite() {
             *d = (2.0 * (0.5 * *d as f64).min(1.0).asin()) as f32;
         }

@@ -576,17 +576,20 @@ fn continents_collide(resample_at_suture: bool) {
         .collect();
     assert!(!south_cont.is_empty());
     let on_north_plate = south_cont.iter().filter(|&&i| crust.plate[i] == 0).count();
-    let stray: Vec<(f64, f64, f32, u32, u32)> = south_cont
+    let stray: Vec<(f64, f64, f32, u32, Option<u32>)> = south_cont
         .iter()
         .filter(|&&i| crust.plate[i] != 0)
         .take(10)
         .map(|&i| {
             let (la, lo) = tectonic_planets::geometry::to_lat_lon_deg(mesh.positions[i]);
-            let src = sim
+            // The last resampling's sources are freed once it is done.
+            let suture = sim
                 .world()
                 .resource::<tectonic_planets::systems::resample::ResampleWork>()
-                .sources[i];
-            (la, lo, crust.elevation_km[i], crust.plate[i], src.suture)
+                .sources
+                .get(i)
+                .map(|s| s.suture);
+            (la, lo, crust.elevation_km[i], crust.plate[i], suture)
         })
         .collect();
     assert!(

@@ -117,6 +117,46 @@ fn releasing_the_work_areas_keeps_the_bits() {
     }
 }
 
+/// A step that resamples frees what only a resampling or only the relief passes use: the
+/// resampling's buffers once it is done, and the drainage network (stale once the samples
+/// move) before the resampling allocates its own, so the two never add up in the peak memory.
+/// Both come back on their next use: the steps that follow build a network again.
+#[test]
+fn a_resampling_step_frees_its_buffers_and_the_network() {
+    use tectonic_planets::systems::relief::DrainageNetwork;
+    use tectonic_planets::systems::resample::ResampleWork;
+    let mut p = small_params(8_000, 3);
+    p.resample.min_interval_steps = 4;
+    p.resample.max_interval_steps = 4;
+    let mut sim = Simulation::new(p).unwrap();
+    let mut seen = 0;
+    for _ in 0..12 {
+        let r = sim.clock().resamplings;
+        sim.step().unwrap();
+        let w = sim.world();
+        let (work, net) = (
+            w.resource::<ResampleWork>(),
+            w.resource::<DrainageNetwork>(),
+        );
+        if sim.clock().resamplings > r {
+            seen += 1;
+            assert!(
+                work.next.is_empty() && work.sources.is_empty() && work.gaps.is_empty(),
+                "the resampling's buffers are held after step {}",
+                sim.clock().step
+            );
+            assert!(
+                !net.built && net.drainage.receiver.is_empty(),
+                "the network is held after the resampling of step {}",
+                sim.clock().step
+            );
+        } else {
+            assert!(net.built, "no network after step {}", sim.clock().step);
+        }
+    }
+    assert!(seen >= 2, "only {seen} resamplings in 12 steps");
+}
+
 #[test]
 fn resume_at_any_step_matches_a_straight_run() {
     const TOTAL: u64 = 30;

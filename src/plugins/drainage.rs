@@ -9,8 +9,8 @@ use bevy_app::{App, Plugin};
 use bevy_ecs::prelude::*;
 
 use super::schedule::{
-    AfterResample, AfterResampleSystems, Phenomenon, PhenomenonAppExt, TectonicStep,
-    TectonicSystems, phenomenon_enabled,
+    AfterResample, AfterResampleSystems, Phenomenon, PhenomenonAppExt, ResampleSystems,
+    TectonicStep, TectonicSystems, phenomenon_enabled,
 };
 use crate::geometry::SphereMesh;
 use crate::resources::{
@@ -48,6 +48,17 @@ impl Plugin for DrainagePlugin {
                 .in_set(TectonicSystems::Drainage)
                 .run_if(phenomenon_enabled(DRAINAGE))
                 .run_if(relief::drainage_due),
+        );
+        // Before a resampling (after the carried rock is laid down on the network), the network
+        // and the relief's work areas make way for the resampling's buffers.
+        app.add_systems(
+            TectonicStep,
+            relief::release_relief_before_resample
+                .in_set(TectonicSystems::Resample)
+                .before(ResampleSystems::Interpolate)
+                .after(relief::deposit_carried_sediment)
+                .run_if(phenomenon_enabled(DRAINAGE))
+                .run_if(crate::systems::resample::resample_due),
         );
         // A resampling moves the samples the network and the carried rock are recorded on.
         app.add_systems(

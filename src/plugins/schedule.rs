@@ -297,7 +297,7 @@ impl Plugin for TectonicSchedulePlugin {
 
 /// Runs the [`AfterResample`] schedule when a resampling installed its crust this step (fronts,
 /// terranes and collision uplift rebuilt on the new crust; timed apart as `after_resample`),
-/// then hands the allocator's free pages back. The last system of
+/// then frees the resampling's buffers and hands the allocator's free pages back. The last system of
 /// [`ResampleSystems::Rebuild`].
 pub fn run_after_resample(world: &mut World) {
     let rebuilt = world
@@ -310,6 +310,7 @@ pub fn run_after_resample(world: &mut World) {
     let _ = world.try_run_schedule(AfterResample);
     if let Some(mut w) = world.get_resource_mut::<resample::ResampleWork>() {
         w.rebuilt = false;
+        w.release_buffers();
     }
     world
         .resource_mut::<StepTimings>()

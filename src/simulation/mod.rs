@@ -389,12 +389,8 @@ impl Simulation {
     /// lower the peak of memory.
     pub fn release_scratch(&mut self) {
         let world = self.app.world_mut();
-        if let Some(mut w) = world.get_resource_mut::<resample::ResampleWork>()
-            && !w.active
-        {
-            w.next = Crust::default();
-            w.sources = Vec::new();
-            w.gaps = Vec::new();
+        if let Some(mut w) = world.get_resource_mut::<resample::ResampleWork>() {
+            w.release_buffers();
         }
         if let Some(mut r) = world.get_resource_mut::<crate::systems::relief::ReliefState>() {
             r.release_scratch();

@@ -746,6 +746,24 @@ pub fn forget_network(mut network: ResMut<DrainageNetwork>, mut flux: ResMut<Sur
     flux.carried = false;
 }
 
+/// Before a resampling, once the rock still carried is laid down: the network (which the
+/// resampling makes stale: [`forget_network`]) and the relief passes' work areas are freed, and
+/// built again on the next step. So the resampling's own buffers do not come on top of them, in
+/// the step that holds the run's peak memory. What is freed never changes a result (a save holds
+/// none of it, and resumes to the same bits).
+pub fn release_relief_before_resample(
+    mut state: ResMut<ReliefState>,
+    mut network: ResMut<DrainageNetwork>,
+    climate: Option<ResMut<ClimateState>>,
+) {
+    state.release_scratch();
+    if let Some(mut c) = climate {
+        c.release_scratch();
+    }
+    network.forget();
+    network.drainage = Drainage::default();
+}
+
 /// Stream-power incision and hillslope diffusion along the network (phenomenon `rivers`): the
 /// surface is lowered where rivers cut and slopes creep, and the crust thins by as much. Every
 /// step, on the last network built (with `time.relief_interval_steps` above 1, one built on an

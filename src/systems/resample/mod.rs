@@ -63,6 +63,19 @@ pub struct ResampleWork {
     started: Option<Instant>,
 }
 
+impl ResampleWork {
+    /// Frees the buffers of the last resampling (the next one allocates them again), unless
+    /// one is in progress. Between resamplings they would only add to the relief passes' work
+    /// areas in the run's peak memory.
+    pub fn release_buffers(&mut self) {
+        if !self.active {
+            self.next = Crust::default();
+            self.sources = Vec::new();
+            self.gaps = Vec::new();
+        }
+    }
+}
+
 /// Run condition of [`AfterResample`](crate::plugins::AfterResample) systems: true when a
 /// resampling installed its crust this step (false when the schedule runs for a new planet or
 /// plates given by hand).

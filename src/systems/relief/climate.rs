@@ -132,7 +132,7 @@ impl ClimateScratch {
                     }
                     // The chord over the arc's length: they differ by under 1e-4 here.
                     let d = positions[j] - positions[i];
-                    let c = (d.dot(w) * radius * f64::from(g.inv_edge_km[e])).clamp(-1.0, 1.0);
+                    let c = (d.dot(w) * radius * f64::from(g.inv_edge_km(e))).clamp(-1.0, 1.0);
                     (c * 127.0).round() as i8
                 })
             })
@@ -287,7 +287,7 @@ pub fn precipitation_prepared(
                             let j = g.neighbors[e] as usize;
                             let up = -f64::from(along[e]) / 127.0;
                             if j < n && up > 0.0 {
-                                num += up * f64::from(hi - height[j]) * f64::from(g.inv_edge_km[e]);
+                                num += up * f64::from(hi - height[j]) * f64::from(g.inv_edge_km(e));
                                 den += up;
                             }
                         }

@@ -56,7 +56,7 @@ use std::collections::VecDeque;
 
 use rayon::prelude::*;
 
-use super::graph::ReliefGraph;
+use super::graph::{ReliefGraph, inv_km};
 use crate::geometry::order_bits;
 
 /// Result and scratch space of [`Drainage::compute`]; reuse one across steps to avoid
@@ -341,9 +341,9 @@ impl Drainage {
                                 g.neighbor_start[i] as usize,
                                 g.neighbor_start[i + 1] as usize,
                             );
-                            let (nb, inv) = (&g.neighbors[a..b], &g.inv_edge_km[a..b]);
-                            // inv = 0 for degenerate edges: slope 0, never chosen.
-                            let slope = |k: usize| (hi - h[nb[k] as usize]) * inv[k];
+                            let (nb, len) = (&g.neighbors[a..b], &g.edge_km[a..b]);
+                            // 1/length = 0 for degenerate edges: slope 0, never chosen.
+                            let slope = |k: usize| (hi - h[nb[k] as usize]) * inv_km(len[k]);
                             // The slopes are kept for a plain's draw (up to 16 neighbours; a
                             // sample with more computes them again).
                             let mut kept = [0.0f32; 16];

@@ -679,6 +679,23 @@ impl CoarseLevel {
             p_idx.push(tris[t]);
             p_w.push([w[0] as f32, w[1] as f32, w[2] as f32]);
         }
+        // Coarse passes: the interpolation and its transpose each add about h²/6 of variance
+        // per axis (hat functions); the passes supply the rest.
+        let mut coarse_edges = Vec::with_capacity(cm.neighbors.len());
+        for i in 0..nc {
+            for &j in cm.neighbors_of(i) {
+                coarse_edges
+                    .push(crate::geometry::angle_between(cp[i], cp[j as usize]) as f32 * r as f32);
+            }
+        }
+        let msq = mean_sq(&coarse_edges);
+        drop(coarse_edges);
+        // Only the coarse adjacency stays: the rest of the coarse mesh and the triangle search
+        // go before the restriction is allocated (they were the peak of the run's first step).
+        drop(adj);
+        drop(dir);
+        let cm = cm.into_data();
+        let (c_start, c_nbrs) = (cm.neighbor_start, cm.neighbors);
         // Restriction = transpose of the interpolation.
         let mut r_start = vec![0u32; nc + 1];
         for ids in &p_idx {
@@ -700,16 +717,6 @@ impl CoarseLevel {
                 fill[c] += 1;
             }
         }
-        // Coarse passes: the interpolation and its transpose each add about h²/6 of variance
-        // per axis (hat functions); the passes supply the rest.
-        let mut coarse_edges = Vec::with_capacity(cm.neighbors.len());
-        for i in 0..nc {
-            for &j in cm.neighbors_of(i) {
-                coarse_edges
-                    .push(crate::geometry::angle_between(cp[i], cp[j as usize]) as f32 * r as f32);
-            }
-        }
-        let msq = mean_sq(&coarse_edges);
         let remaining = (sigma_km * sigma_km - msq / 3.0).max(0.0);
         let per_pass = 0.5 * msq;
         let passes = if remaining > 0.0 {
@@ -722,12 +729,11 @@ impl CoarseLevel {
         } else {
             0.0
         };
-        let cm = cm.into_data();
         let mut level = Self {
             sigma_km,
             n_fine: n,
-            c_start: cm.neighbor_start,
-            c_nbrs: cm.neighbors,
+            c_start,
+            c_nbrs,
             p_idx,
             p_w,
             r_start,

@@ -97,17 +97,26 @@ fn save_and_load_restore_every_bit() {
 /// Freeing the steps' work areas (what `generate` does before its maps) changes nothing that
 /// follows: runs that release them after a few steps give the straight run's bits. Seen to fail
 /// when the release also took the fronts' distance fields (state, rebuilt only at a
-/// resampling).
+/// resampling), and with a network that serves the next step freed and not built again.
 #[test]
 fn releasing_the_work_areas_keeps_the_bits() {
+    use tectonic_planets::systems::relief::DrainageNetwork;
     const TOTAL: u64 = 16;
     let p = small_params(8_000, 3);
+    assert_eq!(p.time.relief_interval_steps, 2);
     let mut straight = Simulation::new(p.clone()).unwrap();
     straight.run_steps(TOTAL).unwrap();
-    for k in [1, 5, 9] {
+    let mut kept = 0;
+    for k in [1, 5, 7, 9] {
         let mut sim = Simulation::new(p.clone()).unwrap();
         sim.run_steps(k).unwrap();
         sim.release_scratch();
+        let net = sim.world().resource::<DrainageNetwork>();
+        assert!(
+            net.drainage.receiver.is_empty(),
+            "the network's buffers stay"
+        );
+        kept += usize::from(net.built && net.source.is_some());
         sim.run_steps(TOTAL - k).unwrap();
         assert_eq!(
             sim.state_hash(),
@@ -115,6 +124,10 @@ fn releasing_the_work_areas_keeps_the_bits() {
             "released after step {k}: differs from the straight run"
         );
     }
+    assert!(
+        kept > 0,
+        "no release fell on a network that serves the next step"
+    );
 }
 
 /// A step that resamples frees what only a resampling or only the relief passes use: the

@@ -44,10 +44,13 @@ impl Plugin for DrainagePlugin {
         });
         app.add_systems(
             TectonicStep,
-            relief::build_drainage
+            (
+                relief::restore_network.run_if(not(relief::drainage_due)),
+                relief::build_drainage.run_if(relief::drainage_due),
+            )
+                .chain()
                 .in_set(TectonicSystems::Drainage)
-                .run_if(phenomenon_enabled(DRAINAGE))
-                .run_if(relief::drainage_due),
+                .run_if(phenomenon_enabled(DRAINAGE)),
         );
         // Before a resampling (after the carried rock is laid down on the network), the network
         // and the relief's work areas make way for the resampling's buffers.

@@ -398,13 +398,14 @@ impl Simulation {
         if let Some(mut c) = world.get_resource_mut::<crate::systems::relief::ClimateState>() {
             c.release_scratch();
         }
-        // A network that serves later steps (`time.relief_interval_steps` above 1) is state, not
-        // scratch: it stays.
-        if let Some(mut n) = world.get_resource_mut::<crate::systems::relief::DrainageNetwork>()
-            && n.source.is_none()
-        {
+        // A network that serves later steps (`time.relief_interval_steps` above 1) keeps what a
+        // save holds of it (its source): its buffers go, and the next step builds them again
+        // from the source, bit for bit (`relief::restore_network`). Any other is forgotten.
+        if let Some(mut n) = world.get_resource_mut::<crate::systems::relief::DrainageNetwork>() {
             n.drainage = Default::default();
-            n.built = false;
+            if n.source.is_none() {
+                n.built = false;
+            }
         }
     }
     /// The sample graph every relief pass works on (see

@@ -94,6 +94,26 @@ pub fn drainage_due(
     clock.step >= net.built_step.saturating_add(k) || (k > 1 && net.source.is_none())
 }
 
+/// Builds the network again from its source when its buffers were freed between steps
+/// ([`crate::simulation::Simulation::release_scratch`] keeps only what a save holds of a network
+/// that serves later steps): the same network, bit for bit ([`DrainageNetwork::rebuild`]), before
+/// the rivers follow it. Runs on the steps that build no network of their own.
+pub fn restore_network(
+    params: Res<Params>,
+    mesh: Res<SphereMesh>,
+    mut state: ResMut<ReliefState>,
+    mut network: ResMut<DrainageNetwork>,
+) {
+    if !network.built || network.drainage.receiver.len() == mesh.len() {
+        return;
+    }
+    let Some(source) = network.source.take() else {
+        return;
+    };
+    let step = network.built_step;
+    network.rebuild(&params, &mesh, &mut state, source, step);
+}
+
 /// Run condition of the sediment's routing: the drainage built the network this step. It lays
 /// down what the rivers and coasts eroded since the last routing.
 pub fn sediment_due(clock: Res<SimClock>, network: Option<Res<DrainageNetwork>>) -> bool {

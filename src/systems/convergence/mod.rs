@@ -147,7 +147,7 @@ pub fn propagate_nearest_grouped(
                 mesh,
                 group_seeds,
                 origin,
-                &|s: usize, _l: u32| group_of_sample[s] == g,
+                &|s: usize, _l: u32| group_of_sample.get(s) == Some(&g),
                 |i| local_ref[i] as usize,
                 max_rad,
                 &mut d,

@@ -1,8 +1,8 @@
 //! The sample graph every relief pass works on: CSR adjacency of the spherical Delaunay mesh,
 //! the area each sample stands for, and per-edge geometry computed once per mesh.
 //!
-//! Units: lengths in km, areas in km². Built once per run (the mesh is fixed); 16 bytes per
-//! directed edge plus 12 per sample, i.e. about 54 MB at 500k samples.
+//! Units: lengths in km, areas in km². Built once per run (the mesh is fixed); 12 bytes per
+//! directed edge plus 12 per sample, i.e. about 42 MB at 500k samples.
 
 use glam::DVec3;
 use rayon::prelude::*;

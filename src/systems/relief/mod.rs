@@ -112,6 +112,11 @@ pub fn restore_network(
     };
     let step = network.built_step;
     network.rebuild(&params, &mesh, &mut state, source, step);
+    // A source that no longer fits the mesh builds nothing: the network is forgotten, and the
+    // drainage builds one of this step's surface.
+    if network.drainage.receiver.len() != mesh.len() {
+        network.forget();
+    }
 }
 
 /// Run condition of the sediment's routing: the drainage built the network this step. It lays

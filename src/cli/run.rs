@@ -413,6 +413,16 @@ pub(crate) fn run_steps_with_progress(
 
 /// Writes the maps, rivers (rivers.png, rivers.geojson), hypsometry.png and summary of `sim`
 /// into `out`; returns the files written.
+/// The land and continental fractions of the surface the maps of a step show (the crust
+/// resampled onto the mesh, as `summary.json` gives them), for the closing line of the run:
+/// the live crust's own figures count its plates' overlaps and leave out their gaps.
+#[derive(bevy_ecs::prelude::Resource)]
+struct MapFigures {
+    step: u64,
+    land_fraction: f64,
+    continental_fraction: f64,
+}
+
 pub(crate) fn write_outputs(sim: &mut Simulation, out: &Path, width: u32) -> Result<Vec<PathBuf>> {
     prepare_out_dir(out)?;
     let view = sim.resampled_crust();
@@ -436,6 +446,12 @@ pub(crate) fn write_outputs(sim: &mut Simulation, out: &Path, width: u32) -> Res
     files.extend(write_rivers(&raster, sim.mesh(), &rivers, out, radius_km)?);
     let mut summary = summarize(sim, &view);
     summary.drainage = Some(rivers.summary(sim.mesh()));
+    let step = sim.clock().step;
+    sim.world_mut().insert_resource(MapFigures {
+        step,
+        land_fraction: summary.land_fraction,
+        continental_fraction: summary.continental_fraction,
+    });
     let hyps_path = out.join("hypsometry.png");
     tectonic_planets::io::hypsometry::write_hypsometry_png(&summary.hypsometry, &hyps_path, 900)?;
     files.push(hyps_path);
@@ -448,14 +464,22 @@ pub(crate) fn write_outputs(sim: &mut Simulation, out: &Path, width: u32) -> Res
 
 pub(crate) fn report(sim: &Simulation, started: Instant, files: &[PathBuf]) {
     let s = sim.stats();
+    // The figures of the maps just written (those of summary.json) when there are any.
+    let (land, continental) = sim
+        .world()
+        .get_resource::<MapFigures>()
+        .filter(|m| m.step == sim.clock().step)
+        .map_or((s.land_fraction, s.continental_fraction), |m| {
+            (m.land_fraction, m.continental_fraction)
+        });
     eprintln!(
         "{} samples, {} plates, {:.0} My in {:.1} s: land {:.1}%, continental crust {:.1}%",
         sim.mesh().len(),
         s.plates,
         sim.time_my(),
         started.elapsed().as_secs_f64(),
-        100.0 * s.land_fraction,
-        100.0 * s.continental_fraction
+        100.0 * land,
+        100.0 * continental
     );
     for f in files {
         eprintln!("  wrote {}", f.display());

@@ -399,13 +399,10 @@ impl Simulation {
             c.release_scratch();
         }
         // A network that serves later steps (`time.relief_interval_steps` above 1) keeps what a
-        // save holds of it (its source): its buffers go, and the next step builds them again
-        // from the source, bit for bit (`relief::restore_network`). Any other is forgotten.
+        // save holds of it (its source), and the next step builds its buffers again from it, bit
+        // for bit. Any other is forgotten.
         if let Some(mut n) = world.get_resource_mut::<crate::systems::relief::DrainageNetwork>() {
-            n.drainage = Default::default();
-            if n.source.is_none() {
-                n.built = false;
-            }
+            n.release_buffers();
         }
     }
     /// The sample graph every relief pass works on (see

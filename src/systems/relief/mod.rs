@@ -225,6 +225,16 @@ impl DrainageNetwork {
         self.source = None;
     }
 
+    /// Frees the network's buffers. A network with its source (one that serves later steps)
+    /// stays built: the next step builds the buffers again from the source
+    /// ([`restore_network`]); any other is forgotten.
+    pub fn release_buffers(&mut self) {
+        self.drainage = Drainage::default();
+        if self.source.is_none() {
+            self.built = false;
+        }
+    }
+
     /// Builds the network again from the `source` it was built from on `step` (a save's): the
     /// same network, bit for bit. `oceanic` of the relief state is set to the source's.
     pub fn rebuild(
@@ -786,7 +796,7 @@ pub fn release_relief_before_resample(
         c.release_scratch();
     }
     network.forget();
-    network.drainage = Drainage::default();
+    network.release_buffers();
 }
 
 /// Stream-power incision and hillslope diffusion along the network (phenomenon `rivers`): the

@@ -15,7 +15,7 @@ fn volume_km3(mesh: &SphereMesh, crust: &Crust) -> f64 {
     crust
         .thickness_km
         .iter()
-        .zip(&mesh.area_km2)
+        .zip(mesh.area_km2.iter())
         .map(|(&t, &a)| t as f64 * a)
         .sum()
 }
@@ -33,7 +33,7 @@ fn bombardment_conserves_crust_volume() {
         .thickness_km
         .iter()
         .zip(&after.thickness_km)
-        .zip(&mesh.area_km2)
+        .zip(mesh.area_km2.iter())
         .map(|((&a, &b), &w)| (a - b).abs() as f64 * w)
         .sum();
     assert!(

@@ -42,12 +42,16 @@ pub struct MeshData {
     pub positions: Vec<DVec3>,
     /// Triangles as sample indices, counter-clockwise seen from outside.
     pub triangles: Vec<[u32; 3]>,
-    /// CSR offsets into `neighbors` (length = samples + 1).
-    pub neighbor_start: Vec<u32>,
-    /// Neighbouring samples along triangle edges, ascending within each sample.
-    pub neighbors: Vec<u32>,
-    /// Area represented by each sample (a third of its incident spherical triangles), km².
-    pub area_km2: Vec<f64>,
+    /// CSR offsets into `neighbors` (length = samples + 1). Shared (an `Arc`) with the relief
+    /// passes' graphs ([`crate::systems::relief::graph::ReliefGraph::from_shared`]), which would
+    /// otherwise hold copies.
+    pub neighbor_start: Arc<[u32]>,
+    /// Neighbouring samples along triangle edges, ascending within each sample (shared like
+    /// `neighbor_start`).
+    pub neighbors: Arc<[u32]>,
+    /// Area represented by each sample (a third of its incident spherical triangles), km²
+    /// (shared like `neighbor_start`).
+    pub area_km2: Arc<[f64]>,
     /// Planet radius, km.
     pub radius_km: f64,
     /// Longest triangle edge, radians.
@@ -167,9 +171,9 @@ impl SphereMesh {
         let mesh = Self(Arc::new(MeshData {
             positions,
             triangles,
-            neighbor_start,
-            neighbors,
-            area_km2,
+            neighbor_start: neighbor_start.into(),
+            neighbors: neighbors.into(),
+            area_km2: area_km2.into(),
             radius_km,
             max_edge_rad,
             locator,
@@ -268,8 +272,8 @@ impl SphereMesh {
     pub fn heap_bytes(&self) -> usize {
         self.positions.capacity() * 24
             + self.triangles.capacity() * 12
-            + (self.neighbor_start.capacity() + self.neighbors.capacity()) * 4
-            + self.area_km2.capacity() * 8
+            + (self.neighbor_start.len() + self.neighbors.len()) * 4
+            + self.area_km2.len() * 8
             + self.locator.heap_bytes()
     }
 

@@ -182,7 +182,7 @@ pub fn hypsometry(mesh: &SphereMesh, crust: &Crust) -> Hypsometry {
     let mut pairs: Vec<(f64, f64)> = crust
         .elevation_km
         .iter()
-        .zip(&mesh.area_km2)
+        .zip(mesh.area_km2.iter())
         .filter(|(z, _)| z.is_finite())
         .map(|(&z, &a)| (z as f64 * 1000.0, a))
         .collect();

@@ -1,8 +1,11 @@
 //! The sample graph every relief pass works on: CSR adjacency of the spherical Delaunay mesh,
 //! the area each sample stands for, and per-edge geometry computed once per mesh.
 //!
-//! Units: lengths in km, areas in km². Built once per run (the mesh is fixed); 12 bytes per
-//! directed edge plus 12 per sample, i.e. about 42 MB at 500k samples.
+//! Units: lengths in km, areas in km². Built once per run (the mesh is fixed); 8 bytes per
+//! directed edge of its own (length and weight), the adjacency and the areas shared with the
+//! mesh: about 24 MB at 500k samples.
+
+use std::sync::Arc;
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -17,15 +20,59 @@ pub fn inv_km(d: f32) -> f32 {
     if d > 0.0 { 1.0 / d } else { 0.0 }
 }
 
+/// The CSR offsets made monotone, in range (≤ `m`, the edge count), `n + 1` long and starting
+/// at 0; `None` when `start` is so already.
+fn repaired_starts(start: &[u32], n: usize, m: usize) -> Option<Vec<u32>> {
+    let m = u32::try_from(m).unwrap_or(u32::MAX);
+    let fine = start.len() == n + 1
+        && start[0] == 0
+        && start.windows(2).all(|w| w[0] <= w[1])
+        && start[n] <= m;
+    if fine {
+        return None;
+    }
+    let mut out = start.to_vec();
+    out.resize(n + 1, *start.last().unwrap_or(&0));
+    let mut prev = 0u32;
+    for s in out.iter_mut() {
+        *s = (*s).clamp(prev, m);
+        prev = *s;
+    }
+    if let Some(first) = out.first_mut() {
+        *first = 0;
+    }
+    Some(out)
+}
+
+/// The neighbour lists with out-of-range neighbours made self-loops (length 0, weight 0,
+/// skipped by every pass); `None` when every neighbour is in range.
+fn repaired_neighbors(start: &[u32], neighbors: &[u32], n: usize) -> Option<Vec<u32>> {
+    let listed = &neighbors[..(start[n] as usize).min(neighbors.len())];
+    if listed.iter().all(|&j| (j as usize) < n) {
+        return None;
+    }
+    let mut out = neighbors.to_vec();
+    for i in 0..n {
+        for nb in &mut out[start[i] as usize..start[i + 1] as usize] {
+            if *nb as usize >= n {
+                *nb = i as u32;
+            }
+        }
+    }
+    Some(out)
+}
+
 /// Sample graph with per-edge geometry. Edge arrays are aligned with `neighbors` (CSR).
 #[derive(Clone, Debug)]
 pub struct ReliefGraph {
-    /// CSR offsets into `neighbors` (length = samples + 1).
-    pub neighbor_start: Vec<u32>,
-    /// Neighbours of each sample (any order; the project sorts them ascending).
-    pub neighbors: Vec<u32>,
-    /// Area each sample stands for, km² (Voronoi/third-of-triangles; sums to 4πR²).
-    pub area_km2: Vec<f64>,
+    /// CSR offsets into `neighbors` (length = samples + 1); shared with the mesh (an `Arc`).
+    pub neighbor_start: Arc<[u32]>,
+    /// Neighbours of each sample (any order; the project sorts them ascending); shared with the
+    /// mesh.
+    pub neighbors: Arc<[u32]>,
+    /// Area each sample stands for, km² (Voronoi/third-of-triangles; sums to 4πR²); shared
+    /// with the mesh.
+    pub area_km2: Arc<[f64]>,
     /// Great-circle length of each directed edge, km.
     pub edge_km: Vec<f32>,
     /// Cotangent weight of each edge: (Voronoi dual-edge length) / (edge length), ≥ 0,
@@ -57,40 +104,51 @@ impl ReliefGraph {
         area_km2: Option<&[f64]>,
         radius_km: f64,
     ) -> Self {
+        let area: Option<Arc<[f64]>> = area_km2.map(Arc::from);
+        Self::from_shared(
+            positions,
+            &Arc::from(neighbor_start),
+            &Arc::from(neighbors),
+            triangles,
+            area.as_ref(),
+            radius_km,
+        )
+    }
+
+    /// [`Self::new`] on arrays held in `Arc`s, as the mesh holds them: arrays that need no
+    /// repair are shared, not copied (at 500,000 samples the adjacency and the areas are 18 MB,
+    /// held once for the mesh and all its graphs).
+    pub fn from_shared(
+        positions: &[DVec3],
+        neighbor_start: &Arc<[u32]>,
+        neighbors: &Arc<[u32]>,
+        triangles: Option<&[[u32; 3]]>,
+        area_km2: Option<&Arc<[f64]>>,
+        radius_km: f64,
+    ) -> Self {
         let n = positions.len();
-        let mut start: Vec<u32> = neighbor_start.to_vec();
-        start.resize(n + 1, *neighbor_start.last().unwrap_or(&0));
-        // Make offsets monotone and in range.
-        let m = neighbors.len() as u32;
-        let mut prev = 0u32;
-        for s in start.iter_mut() {
-            *s = (*s).clamp(prev, m);
-            prev = *s;
-        }
-        if let Some(first) = start.first_mut() {
-            *first = 0;
-        }
-        // Out-of-range or self neighbours become self-loops (length 0, weight 0), skipped by
-        // every pass.
-        let mut nbrs: Vec<u32> = neighbors.to_vec();
-        for i in 0..n {
-            for nb in &mut nbrs[start[i] as usize..start[i + 1] as usize] {
-                if *nb as usize >= n {
-                    *nb = i as u32;
-                }
-            }
-        }
+        let start: Arc<[u32]> = repaired_starts(neighbor_start, n, neighbors.len())
+            .map_or_else(|| neighbor_start.clone(), Arc::from);
+        let nbrs: Arc<[u32]> =
+            repaired_neighbors(&start, neighbors, n).map_or_else(|| neighbors.clone(), Arc::from);
         let radius = if radius_km.is_finite() && radius_km > 0.0 {
             radius_km
         } else {
             1.0
         };
-        let area: Vec<f64> = match area_km2 {
-            Some(a) if a.len() == n => a
-                .iter()
-                .map(|&x| if x.is_finite() && x > 0.0 { x } else { 0.0 })
-                .collect(),
-            _ => vec![4.0 * std::f64::consts::PI * radius * radius / n.max(1) as f64; n],
+        let area: Arc<[f64]> = match area_km2 {
+            Some(a) if a.len() == n => {
+                // Negative, NaN and infinite areas read as 0 (−0 too, as +0).
+                let bad = |x: f64| !(x.is_finite() && x > 0.0) && x.to_bits() != 0;
+                if a.iter().any(|&x| bad(x)) {
+                    a.iter()
+                        .map(|&x| if x.is_finite() && x > 0.0 { x } else { 0.0 })
+                        .collect()
+                } else {
+                    a.clone()
+                }
+            }
+            _ => vec![4.0 * std::f64::consts::PI * radius * radius / n.max(1) as f64; n].into(),
         };
         let edge_km: Vec<f32> = (0..n)
             .into_par_iter()

@@ -288,8 +288,8 @@ pub fn ocean_elevation_km(
 struct CoarseLevel {
     sigma_km: f64,
     n_fine: usize,
-    c_start: Vec<u32>,
-    c_nbrs: Vec<u32>,
+    c_start: std::sync::Arc<[u32]>,
+    c_nbrs: std::sync::Arc<[u32]>,
     /// Per fine sample: the coarse triangle's corners and barycentric weights.
     p_idx: Vec<[u32; 3]>,
     p_w: Vec<[f32; 3]>,

@@ -43,7 +43,7 @@ pub fn river_threshold_km2(total_area_km2: f64, samples: usize) -> f64 {
 
 /// The sample graph of `mesh` (what every relief pass works on).
 pub fn relief_graph(mesh: &SphereMesh) -> ReliefGraph {
-    ReliefGraph::new(
+    ReliefGraph::from_shared(
         &mesh.positions,
         &mesh.neighbor_start,
         &mesh.neighbors,
@@ -59,7 +59,7 @@ pub fn relief_graph(mesh: &SphereMesh) -> ReliefGraph {
 /// The weights are a serial pass over the triangles, about 100 ms at 500,000 samples; the
 /// hillslope diffusion and the isostasy's flexure need them ([`relief_graph`]).
 pub fn drainage_graph(mesh: &SphereMesh) -> ReliefGraph {
-    ReliefGraph::new(
+    ReliefGraph::from_shared(
         &mesh.positions,
         &mesh.neighbor_start,
         &mesh.neighbors,

@@ -198,7 +198,7 @@ pub fn resample_interpolate(
     let lost: f64 = work
         .sources
         .iter()
-        .zip(&mesh.area_km2)
+        .zip(mesh.area_km2.iter())
         .filter(|(s, _)| s.continental_lost)
         .map(|(_, a)| *a)
         .sum();

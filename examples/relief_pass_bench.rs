@@ -7,11 +7,13 @@ use std::time::Instant;
 
 use tectonic_planets::resources::Params;
 use tectonic_planets::resources::{Crust, CrustType};
+use tectonic_planets::systems::relief::climate::{ClimateScratch, precipitation};
 use tectonic_planets::systems::relief::drainage::{Drainage, SeaMaskScratch, sea_mask_with};
 use tectonic_planets::systems::relief::sediment::SedimentRouter;
 use tectonic_planets::systems::relief::stream_power::{StreamPowerScratch, stream_power_erode};
 use tectonic_planets::systems::relief::{
-    Precipitation, ReliefState, SurfaceFlux, lake_area_ratio, sediment_params, stream_power_params,
+    Precipitation, ReliefState, SurfaceFlux, climate_params, lake_area_ratio, sediment_params,
+    stream_power_params,
 };
 
 /// The fastest of `reps` calls, ms (the least disturbed by the rest of a shared machine).
@@ -63,6 +65,20 @@ fn main() {
         reps,
     );
     println!("  sea mask          {t:8.3} ms");
+
+    let mesh = w.resource::<tectonic_planets::geometry::SphereMesh>();
+    let cp = climate_params(&params);
+    let mut cs = ClimateScratch::default();
+    let mut out = Vec::new();
+    let t = fastest_ms(
+        || {
+            let c = Instant::now();
+            precipitation(&g, &mesh.positions, &elev, &cp, &mut out, &mut cs);
+            c.elapsed().as_secs_f64() * 1e3
+        },
+        reps,
+    );
+    println!("  climate           {t:8.3} ms");
 
     let mut d = Drainage::default();
     d.lake_area_ratio = lake_area_ratio(&params);

@@ -8,6 +8,8 @@ use std::time::Instant;
 use tectonic_planets::resources::Params;
 use tectonic_planets::resources::{Crust, CrustType};
 use tectonic_planets::systems::relief::climate::{ClimateScratch, precipitation};
+use tectonic_planets::systems::relief::coast::{CoastScratch, shallow_width_km};
+use tectonic_planets::systems::relief::diffusion::{DiffusionScratch, diffuse_land};
 use tectonic_planets::systems::relief::drainage::{Drainage, SeaMaskScratch, sea_mask_with};
 use tectonic_planets::systems::relief::sediment::SedimentRouter;
 use tectonic_planets::systems::relief::stream_power::{StreamPowerScratch, stream_power_erode};
@@ -135,6 +137,48 @@ fn main() {
         reps,
     );
     println!("  stream power      {t:8.3} ms");
+
+    let mut dz = vec![0.0f32; n];
+    let mut to_sea = vec![0.0f64; n];
+    let mut ds = DiffusionScratch::default();
+    let mut substeps = 0;
+    let t = fastest_ms(
+        || {
+            z.copy_from_slice(&elev);
+            let c = Instant::now();
+            substeps = diffuse_land(
+                &g,
+                &mut z,
+                &ocean,
+                params.rivers.hillslope_diffusivity_km2_per_my,
+                params.time.time_step_my,
+                &mut dz,
+                &mut to_sea,
+                &mut ds,
+            )
+            .substeps;
+            c.elapsed().as_secs_f64() * 1e3
+        },
+        reps,
+    );
+    println!("  diffusion         {t:8.3} ms  ({substeps} substeps)");
+
+    let mut cs = CoastScratch::default();
+    let t = fastest_ms(
+        || {
+            let c = Instant::now();
+            shallow_width_km(
+                &g,
+                &ocean,
+                &elev,
+                params.coasts.open_water_depth_m * 1e-3,
+                &mut cs,
+            );
+            c.elapsed().as_secs_f64() * 1e3
+        },
+        reps,
+    );
+    println!("  shallow widths    {t:8.3} ms");
 
     let sp = sediment_params(&params);
     let (fill, passages) = w.resource::<ReliefState>().sediment_inputs();

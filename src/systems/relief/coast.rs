@@ -43,7 +43,8 @@ pub struct CoastScratch {
     /// Whether each sample was open sea in the last call.
     open: Vec<bool>,
     shallow: Vec<u32>,
-    heap: std::collections::BinaryHeap<std::cmp::Reverse<(u32, u32)>>,
+    /// The bucket queue of the width search.
+    buckets: Vec<Vec<u32>>,
     lower: Vec<(u32, f32)>,
 }
 
@@ -65,7 +66,8 @@ impl CoastScratch {
 /// (0 for those; infinite for shallow seas with no open water). Land samples get infinity.
 /// Read them with [`CoastScratch::width_km`].
 ///
-/// Dijkstra from the open-sea samples next to shallow sea, ties broken by index: deterministic.
+/// A least-cost search from the open-sea samples next to shallow sea (a bucket queue,
+/// label-correcting: the widths are the least path sums, as a Dijkstra search gives them).
 /// Cost: one parallel pass over the samples, then work on the shallow sea only (the widths of
 /// the last call are reset sample by sample, not as a whole).
 pub fn shallow_width_km(
@@ -105,38 +107,57 @@ pub fn shallow_width_km(
             .filter(|&i| shallow(i as usize)),
     );
     // Open samples next to shallow sea start the search.
-    let (width, touched, heap, is_open) = (&mut s.width, &mut s.touched, &mut s.heap, &s.open);
-    heap.clear();
+    let (width, touched, buckets, is_open) =
+        (&mut s.width, &mut s.touched, &mut s.buckets, &s.open);
+    for b in buckets.iter_mut() {
+        b.clear();
+    }
+    // A bucket queue over the width (buckets half a mean edge wide, at most 2¹⁶ of them),
+    // label-correcting: a sample whose width falls after it was handled goes back into the
+    // queue. So the widths are the least path sums whatever the order within a bucket: those of
+    // a Dijkstra search, as the path sums are the same additions.
+    let per_bucket = 1.0 / (0.5 * g.mean_spacing_km).max(1e-3);
+    let bucket = |d: f32| ((f64::from(d) * per_bucket) as usize).min(1 << 16);
+    let push = |buckets: &mut Vec<Vec<u32>>, k: usize, i: u32| {
+        if k >= buckets.len() {
+            buckets.resize_with(k + 1, Vec::new);
+        }
+        buckets[k].push(i);
+    };
     for &i in &s.shallow {
         for e in g.edges(i as usize) {
             let j = g.neighbors[e];
             if is_open[j as usize] && width[j as usize] != 0.0 {
                 width[j as usize] = 0.0;
                 touched.push(j);
-                heap.push(std::cmp::Reverse((0f32.to_bits(), j)));
+                push(buckets, 0, j);
             }
         }
     }
-    while let Some(std::cmp::Reverse((bits, i))) = heap.pop() {
-        let i = i as usize;
-        let d = f32::from_bits(bits);
-        if d > width[i] {
-            continue;
-        }
-        for e in g.edges(i) {
-            let j = g.neighbors[e] as usize;
-            if !shallow(j) {
-                continue;
+    let mut k = 0;
+    while k < buckets.len() {
+        while let Some(i) = buckets[k].pop() {
+            let i = i as usize;
+            let d = width[i];
+            if bucket(d) != k {
+                continue; // lowered since: handled from its new bucket
             }
-            let dj = d + g.edge_km[e];
-            if dj < width[j] {
-                if width[j] == f32::INFINITY {
-                    touched.push(j as u32);
+            for e in g.edges(i) {
+                let j = g.neighbors[e] as usize;
+                if !shallow(j) {
+                    continue;
                 }
-                width[j] = dj;
-                heap.push(std::cmp::Reverse((dj.to_bits(), j as u32)));
+                let dj = d + g.edge_km[e];
+                if dj < width[j] {
+                    if width[j] == f32::INFINITY {
+                        touched.push(j as u32);
+                    }
+                    width[j] = dj;
+                    push(buckets, bucket(dj), j as u32);
+                }
             }
         }
+        k += 1;
     }
 }
 
@@ -165,7 +186,9 @@ pub fn coastal_erosion(
     {
         return 0.0;
     }
+    let t = crate::systems::DebugTimer::new("coasts: shallow widths");
     shallow_width_km(g, ocean, elevation_km, p.open_depth_km, scratch);
+    drop(t);
     let mut lower = std::mem::take(&mut scratch.lower);
     lower.clear();
     let sc = &*scratch;
@@ -299,6 +322,7 @@ pub fn erode_coasts(
     let state = &mut *state;
     let mut crust_res = crust;
     let crust = &mut *crust_res;
+    let mut lap = super::lap_timer();
     let fresh = network.fresh(clock.step);
     flux.open(n, fresh);
     // The relief state's buffers for the sea as it is now (the rivers' before this).
@@ -315,6 +339,7 @@ pub fn erode_coasts(
         );
         &sea
     };
+    let t_sea = lap();
     let volume = coastal_erosion(
         g,
         ocean,
@@ -325,6 +350,7 @@ pub fn erode_coasts(
         params.time.time_step_my,
         &mut state.scratch,
     );
+    tracing::debug!(sea = t_sea, erosion = lap(), "coasts by pass (ms)");
     relief.sea_now = sea;
     flux.coastal_km3 += volume;
     flux.total_eroded_km3 += volume;

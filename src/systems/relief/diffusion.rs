@@ -54,7 +54,6 @@ impl DiffusionBudget {
 pub struct DiffusionScratch {
     h: Vec<f64>,
     next: Vec<f64>,
-    land: Vec<u32>,
     coast: Vec<u32>,
     receipts: Vec<f64>,
     max_weight_rate: Option<(usize, f64)>,
@@ -83,13 +82,13 @@ fn prepare(
     scratch: &mut DiffusionScratch,
 ) -> Option<(u32, f64)> {
     let n = g.len();
-    delta_km.iter_mut().for_each(|d| *d = 0.0);
     if !(kappa_km2_per_my > 0.0 && dt_my > 0.0)
         || elevation_km.len() < n
         || ocean.len() < n
         || delta_km.len() < n
         || to_ocean_km3.len() < n
     {
+        delta_km.iter_mut().for_each(|d| *d = 0.0);
         return None;
     }
     let kappa = kappa_km2_per_my;
@@ -109,42 +108,57 @@ fn prepare(
     };
     let max_rate = kappa * max_w;
     if max_rate <= 0.0 {
+        delta_km.iter_mut().for_each(|d| *d = 0.0);
         return None;
     }
+    // The land's entries are written at the end (`apply_land_change`), the sea's zeroed there.
+    delta_km[n..].iter_mut().for_each(|d| *d = 0.0);
     let substeps = ((dt_my * max_rate / 0.5).ceil() as u32).clamp(1, 10_000);
     let dts = dt_my / substeps as f64;
-    scratch.land.clear();
-    scratch
-        .land
-        .extend((0..n as u32).filter(|&i| !ocean[i as usize]));
     scratch.coast.clear();
-    for &i in &scratch.land {
-        for &j in g.neighbors_of(i as usize) {
-            if ocean[j as usize] {
-                scratch.coast.push(j);
+    if g.is_symmetric() {
+        // The sea samples with a land neighbour: in index order, each once.
+        scratch.coast.par_extend(
+            (0..n as u32)
+                .into_par_iter()
+                .with_min_len(8192)
+                .filter(|&j| {
+                    ocean[j as usize]
+                        && g.neighbors_of(j as usize)
+                            .iter()
+                            .any(|&i| !ocean[i as usize])
+                }),
+        );
+    } else {
+        for i in (0..n).filter(|&i| !ocean[i]) {
+            for &j in g.neighbors_of(i) {
+                if ocean[j as usize] {
+                    scratch.coast.push(j);
+                }
             }
         }
+        scratch.coast.sort_unstable();
+        scratch.coast.dedup();
     }
-    scratch.coast.sort_unstable();
-    scratch.coast.dedup();
     Some((substeps, dts))
 }
 
-/// The end of one call: writes the new elevation `new_of(i)` of every land sample of `scratch`
-/// whose elevation was finite, its change to `delta_km`, and the volumes lowered and raised to
-/// `budget`.
+/// The end of one call: writes the new elevation `new_of(i)` of every land sample (not in
+/// `ocean`) whose elevation was finite, its change to `delta_km` (0 elsewhere), and the volumes
+/// lowered and raised to `budget` (summed in index order).
 fn apply_land_change(
     g: &ReliefGraph,
     elevation_km: &mut [f32],
     delta_km: &mut [f32],
-    land: &[u32],
+    ocean: &[bool],
     new_of: impl Fn(usize) -> f32,
     budget: &mut DiffusionBudget,
 ) {
-    for &i in land {
-        let i = i as usize;
+    let n = g.len();
+    for i in 0..n {
+        delta_km[i] = 0.0;
         let old = elevation_km[i];
-        if !old.is_finite() {
+        if ocean[i] || !old.is_finite() {
             continue;
         }
         let new = new_of(i);
@@ -191,13 +205,19 @@ pub fn diffuse_land(
     let kappa = kappa_km2_per_my;
     scratch.h.resize(n, 0.0);
     scratch.next.resize(n, 0.0);
-    for &i in &scratch.land {
-        let z = elevation_km[i as usize] as f64;
-        scratch.h[i as usize] = if z.is_finite() { z } else { 0.0 };
-    }
+    // Only the land's heights are read (the sea's entries keep whatever they held).
+    const CH: usize = 8192;
+    scratch.h.par_chunks_mut(CH).enumerate().for_each(|(c, h)| {
+        for (k, h) in h.iter_mut().enumerate() {
+            let i = c * CH + k;
+            if !ocean[i] {
+                let z = elevation_km[i] as f64;
+                *h = if z.is_finite() { z } else { 0.0 };
+            }
+        }
+    });
     scratch.receipts.clear();
     scratch.receipts.resize(scratch.coast.len(), 0.0);
-    const CH: usize = 8192;
     for _ in 0..substeps {
         let h = &scratch.h;
         scratch
@@ -261,7 +281,7 @@ pub fn diffuse_land(
         g,
         elevation_km,
         delta_km,
-        &scratch.land,
+        ocean,
         |i| h[i] as f32,
         &mut budget,
     );
@@ -336,13 +356,6 @@ pub fn diffuse_land_gpu(
         budget.to_ocean_km3 += r;
     }
     let h = &scratch.device_h;
-    apply_land_change(
-        g,
-        elevation_km,
-        delta_km,
-        &scratch.land,
-        |i| h[i],
-        &mut budget,
-    );
+    apply_land_change(g, elevation_km, delta_km, ocean, |i| h[i], &mut budget);
     Ok(Some(budget))
 }

@@ -849,6 +849,7 @@ pub fn erode_rivers(
     // This step's cut goes straight into the flux when it holds nothing yet (every step with
     // `time.relief_interval_steps` = 1), else into the step's own buffers and then added: the
     // crust thins by this step's cut alone.
+    let mut lap = lap_timer();
     let fresh = network.fresh(clock.step);
     let add = flux.open(n, fresh);
     // On a later step of the network, the slopes see the sea where it is now.
@@ -881,6 +882,7 @@ pub fn erode_rivers(
             &mut flux.to_ocean_km3,
         ),
     };
+    let t_sea = lap();
     let mut incised_km3 = stream_power_erode_to(
         g,
         &network.drainage,
@@ -892,6 +894,7 @@ pub fn erode_rivers(
         dt,
         &mut state.spl,
     );
+    let t_spl = lap();
     // Background denudation: land loses k·min(z, cap) per My, added to the rock the rivers
     // carry.
     let k_den = params.rivers.denudation_per_my;
@@ -926,6 +929,7 @@ pub fn erode_rivers(
             .sum();
         incised_km3 += extra;
     }
+    let t_den = lap();
     // Hillslope diffusion: on the device when the write is declared (the device then holds the
     // diffused elevation, and only the thickness goes up at the end), else on the CPU.
     let mut on_device = None;
@@ -972,6 +976,7 @@ pub fn erode_rivers(
             &mut state.diffusion,
         ),
     };
+    let t_dif = lap();
     crust
         .thickness_km
         .par_iter_mut()
@@ -985,6 +990,14 @@ pub fn erode_rivers(
         state.step_flux = o;
     }
     state.sea_now = sea_now;
+    tracing::debug!(
+        sea = t_sea,
+        stream_power = t_spl,
+        denudation = t_den,
+        diffusion = t_dif,
+        rest = lap(),
+        "rivers by pass (ms)"
+    );
     flux.total_eroded_km3 += incised_km3 + budget.lowered_km3;
     flux.total_deposited_km3 += budget.raised_km3;
     flux.incised_km3 += incised_km3;

@@ -40,9 +40,11 @@ pub struct CoastScratch {
     width: Vec<f32>,
     /// Samples whose width was set by the last call.
     touched: Vec<u32>,
-    /// Whether each sample was open sea in the last call.
-    open: Vec<bool>,
+    /// What each sample was in the last call: [`OPEN`] sea, [`SHALLOW`] sea, or neither (land).
+    class: Vec<u8>,
     shallow: Vec<u32>,
+    /// The shallow samples of each chunk of the samples (gathered in parallel, then in order).
+    chunks: Vec<Vec<u32>>,
     /// The bucket queue of the width search.
     buckets: Vec<Vec<u32>>,
     lower: Vec<(u32, f32)>,
@@ -53,13 +55,18 @@ impl CoastScratch {
     /// sea, the distance to open sea through shallow sea, infinite on land, on shallow seas with
     /// no open water and out of range.
     pub fn width_km(&self, i: usize) -> f32 {
-        if self.open.get(i).copied().unwrap_or(false) {
+        if self.class.get(i) == Some(&OPEN) {
             0.0
         } else {
             self.width.get(i).copied().unwrap_or(f32::INFINITY)
         }
     }
 }
+
+/// A sea sample deeper than the open-water depth (see [`CoastScratch::class`]).
+const OPEN: u8 = 1;
+/// A sea sample shallower than the open-water depth.
+const SHALLOW: u8 = 2;
 
 /// Width (km) of shallow sea between each sea sample and open water: the shortest path along the
 /// graph, through sea samples shallower than `open_depth_km`, to a sea sample deeper than it
@@ -68,7 +75,8 @@ impl CoastScratch {
 ///
 /// A least-cost search from the open-sea samples next to shallow sea (a bucket queue,
 /// label-correcting: the widths are the least path sums, as a Dijkstra search gives them).
-/// Cost: one parallel pass over the samples, then work on the shallow sea only (the widths of
+/// Cost: one parallel pass over the samples (each one's class in a byte, which the search reads
+/// instead of the elevation), then work on the shallow sea only (the widths of
 /// the last call are reset sample by sample, not as a whole).
 pub fn shallow_width_km(
     g: &ReliefGraph,
@@ -90,25 +98,40 @@ pub fn shallow_width_km(
     }
     s.touched.clear();
     let (ocean, elevation_km) = (&ocean[..n], &elevation_km[..n]);
-    s.open.clear();
-    s.open.par_extend(
-        ocean
-            .par_iter()
-            .zip(elevation_km.par_iter())
-            .with_min_len(8192)
-            .map(|(&o, &z)| o && z <= open),
-    );
-    let shallow = |i: usize| ocean[i] && elevation_km[i] > open;
+    // One pass: each sample's class, and the shallow samples of each chunk in order.
+    const CH: usize = 8192;
+    s.class.resize(n, 0);
+    s.chunks.resize_with(n.div_ceil(CH), Vec::new);
+    s.class
+        .par_chunks_mut(CH)
+        .zip(s.chunks.par_iter_mut())
+        .enumerate()
+        .for_each(|(c, (cl, list))| {
+            list.clear();
+            for (k, cl) in cl.iter_mut().enumerate() {
+                let i = c * CH + k;
+                let z = elevation_km[i];
+                // (A NaN elevation is neither.)
+                *cl = if !ocean[i] {
+                    0
+                } else if z <= open {
+                    OPEN
+                } else if z > open {
+                    list.push(i as u32);
+                    SHALLOW
+                } else {
+                    0
+                };
+            }
+        });
     s.shallow.clear();
-    s.shallow.par_extend(
-        (0..n as u32)
-            .into_par_iter()
-            .with_min_len(8192)
-            .filter(|&i| shallow(i as usize)),
-    );
+    for list in &s.chunks {
+        s.shallow.extend_from_slice(list);
+    }
+    let class = &s.class;
+    let shallow = |i: usize| class[i] == SHALLOW;
     // Open samples next to shallow sea start the search.
-    let (width, touched, buckets, is_open) =
-        (&mut s.width, &mut s.touched, &mut s.buckets, &s.open);
+    let (width, touched, buckets) = (&mut s.width, &mut s.touched, &mut s.buckets);
     for b in buckets.iter_mut() {
         b.clear();
     }
@@ -127,7 +150,7 @@ pub fn shallow_width_km(
     for &i in &s.shallow {
         for e in g.edges(i as usize) {
             let j = g.neighbors[e];
-            if is_open[j as usize] && width[j as usize] != 0.0 {
+            if class[j as usize] == OPEN && width[j as usize] != 0.0 {
                 width[j as usize] = 0.0;
                 touched.push(j);
                 push(buckets, 0, j);
@@ -564,5 +587,68 @@ mod tests {
             }
         }
         assert!(seen > 100);
+    }
+
+    /// The bucket search gives the widths of a plain Dijkstra search, bit for bit, on an
+    /// irregular mesh with a ragged shelf, islands and lagoons; and a second call on another
+    /// surface forgets the first one's widths.
+    #[test]
+    fn shallow_widths_match_a_dijkstra_search() {
+        let mesh = SphereMesh::fibonacci(20_000, 0.5, 11, 6371.0).expect("mesh");
+        let g = crate::systems::relief::network::relief_graph(&mesh);
+        let surface = |phase: f64| -> Vec<f32> {
+            mesh.positions
+                .iter()
+                .map(|p| {
+                    let w = (5.0 * p.x + phase).sin() * (4.0 * p.y).cos() + 0.6 * (9.0 * p.z).sin();
+                    (0.6 * w - 0.25) as f32
+                })
+                .collect()
+        };
+        let reference = |ocean: &[bool], z: &[f32], open: f32| -> Vec<f32> {
+            let n = g.len();
+            let shallow = |i: usize| ocean[i] && z[i] > open;
+            let is_open = |i: usize| ocean[i] && z[i] <= open;
+            let mut w = vec![f32::INFINITY; n];
+            let mut heap = std::collections::BinaryHeap::new();
+            for i in (0..n).filter(|&i| shallow(i)) {
+                for &j in g.neighbors_of(i) {
+                    if is_open(j as usize) && w[j as usize] != 0.0 {
+                        w[j as usize] = 0.0;
+                        heap.push(std::cmp::Reverse((0f32.to_bits(), j)));
+                    }
+                }
+            }
+            while let Some(std::cmp::Reverse((bits, i))) = heap.pop() {
+                let (i, d) = (i as usize, f32::from_bits(bits));
+                if d > w[i] {
+                    continue;
+                }
+                for e in g.edges(i) {
+                    let j = g.neighbors[e] as usize;
+                    if shallow(j) && d + g.edge_km[e] < w[j] {
+                        w[j] = d + g.edge_km[e];
+                        heap.push(std::cmp::Reverse((w[j].to_bits(), j as u32)));
+                    }
+                }
+            }
+            (0..n)
+                .map(|i| if is_open(i) { 0.0 } else { w[i] })
+                .collect()
+        };
+        let mut s = CoastScratch::default();
+        for phase in [0.0, 1.3] {
+            let z = surface(phase);
+            let ocean: Vec<bool> = z.iter().map(|&z| z <= 0.0).collect();
+            let shallow = z.iter().filter(|&&z| z <= 0.0 && z > -0.2).count();
+            assert!(shallow > 1000, "{shallow} shallow samples");
+            shallow_width_km(&g, &ocean, &z, 0.2, &mut s);
+            let want = reference(&ocean, &z, -0.2);
+            let got: Vec<f32> = (0..g.len()).map(|i| s.width_km(i)).collect();
+            assert!(want.iter().any(|w| w.is_finite() && *w > 1000.0));
+            for i in 0..g.len() {
+                assert_eq!(got[i].to_bits(), want[i].to_bits(), "sample {i}");
+            }
+        }
     }
 }

@@ -792,3 +792,54 @@ fn generate_reports_the_land_of_its_maps() {
         );
     }
 }
+
+/// `--backend auto` surveys the adapters in a child process (`planet probe-adapters`, hidden):
+/// its output reads back as a survey, and with the search limited to a backend this machine
+/// lacks, `auto` runs on the CPU and says why, as the search in the process did.
+#[test]
+fn the_adapter_survey_runs_in_a_child_process() {
+    let out = planet().arg("probe-adapters").output().expect("run planet");
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    let survey = tectonic_planets::gpu::AdapterSurvey::from_text(&text)
+        .unwrap_or_else(|| panic!("not a survey: {text:?}"));
+    assert!(!survey.backends.is_empty());
+    let limited = planet()
+        .arg("probe-adapters")
+        .env("WGPU_BACKEND", "dx12")
+        .output()
+        .expect("run planet");
+    let none =
+        tectonic_planets::gpu::AdapterSurvey::from_text(&String::from_utf8_lossy(&limited.stdout))
+            .expect("survey");
+    assert_eq!(
+        (none.hardware.as_deref(), none.software.as_deref()),
+        (None, None)
+    );
+    let note = none.cpu_note();
+    assert!(note.contains("no GPU adapter found") && note.ends_with("compute backend: cpu"));
+    // `generate` under `auto` gives the child's note (as a warning: no adapter at all).
+    let dir = std::env::temp_dir().join(format!("planet-survey-{}", std::process::id()));
+    let run = planet()
+        .args([
+            "generate",
+            "--samples",
+            "2000",
+            "--my",
+            "2",
+            "--width",
+            "32",
+            "--quiet",
+        ])
+        .args(["--backend", "auto", "--out"])
+        .arg(&dir)
+        .env("WGPU_BACKEND", "dx12")
+        .env("PLANET_LOG", "debug")
+        .output()
+        .expect("run planet");
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    assert!(err.contains(&note), "{err}");
+    assert!(err.contains("surveyed in a child process"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -58,6 +58,10 @@ pub(crate) enum Command {
     /// Open the viewer: watch, steer and toggle the stepped schedule live.
     #[cfg(feature = "viewer")]
     View(ViewArgs),
+    /// Print the GPU adapters `--backend auto` would choose from, for a parent `planet` (see
+    /// [`use_backend`]); not for users.
+    #[command(hide = true)]
+    ProbeAdapters,
 }
 
 /// Options shared by every command that builds a planet.
@@ -167,6 +171,10 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                     p.description
                 );
             }
+            Ok(())
+        }
+        Command::ProbeAdapters => {
+            print!("{}", tectonic_planets::gpu::AdapterSurvey::take().to_text());
             Ok(())
         }
         Command::Bench(a) => bench(a),
@@ -336,10 +344,27 @@ pub(crate) fn build_sim(
 }
 
 /// Installs the compute backend; says which one when it is not the one asked for.
+///
+/// Under `auto` the adapters are first surveyed in a child process (this program, `planet
+/// probe-adapters`): with no hardware GPU the CPU runs, and no Vulkan driver (Mesa's lavapipe
+/// and its LLVM, about 50 MB resident) is ever loaded here. With one, or when the child cannot
+/// tell, the search runs here as before.
 pub(crate) fn use_backend(sim: &mut Simulation, choice: BackendChoice) -> Result<()> {
-    let note = sim
-        .set_backend(choice)
-        .context("could not start the GPU compute backend")?;
+    let surveyed = (choice == BackendChoice::Auto)
+        .then(survey_in_child)
+        .flatten()
+        .filter(|s| s.hardware.is_none());
+    let note = match surveyed {
+        Some(survey) => {
+            tracing::debug!("adapters surveyed in a child process: no hardware GPU");
+            sim.set_backend(BackendChoice::Cpu)
+                .context("could not start the CPU compute backend")?;
+            survey.cpu_note()
+        }
+        None => sim
+            .set_backend(choice)
+            .context("could not start the GPU compute backend")?,
+    };
     // Falling back for want of any adapter is worth a warning; a machine with only a software
     // adapter (lavapipe) is the ordinary CPU case.
     if choice == BackendChoice::Auto
@@ -351,6 +376,22 @@ pub(crate) fn use_backend(sim: &mut Simulation, choice: BackendChoice) -> Result
         tracing::info!("{note}");
     }
     Ok(())
+}
+
+/// The adapters as `planet probe-adapters` (this executable, in a child process) finds them;
+/// `None` when the child could not be run or said something else.
+fn survey_in_child() -> Option<tectonic_planets::gpu::AdapterSurvey> {
+    let exe = std::env::current_exe().ok()?;
+    let out = std::process::Command::new(exe)
+        .arg("probe-adapters")
+        .stdin(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .output()
+        .ok()?;
+    if !out.status.success() {
+        return None;
+    }
+    tectonic_planets::gpu::AdapterSurvey::from_text(&String::from_utf8_lossy(&out.stdout))
 }
 
 /// The command line as typed, for the command history of saves.

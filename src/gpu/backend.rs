@@ -137,20 +137,15 @@ pub fn select_backend(choice: BackendChoice) -> Result<SelectedBackend, GpuError
     };
     let Some(k) = pick else {
         if choice == BackendChoice::Auto {
-            let why = match adapters.first() {
-                Some(a) => format!(
-                    "{SOFTWARE_ONLY} (only the software adapter {}); compute backend: cpu",
-                    a.get_info().name
-                ),
-                None => format!(
-                    "{}; compute backend: cpu",
-                    GpuError::NoAdapter(format!(" for backends {backends:?}"))
-                ),
+            let survey = AdapterSurvey {
+                hardware: None,
+                software: adapters.first().map(|a| a.get_info().name),
+                backends: format!("{backends:?}"),
             };
             return Ok(SelectedBackend {
                 backend: ComputeBackend::Cpu,
                 context: None,
-                note: why,
+                note: survey.cpu_note(),
             });
         }
         return Err(GpuError::NoAdapter(format!(" for backends {backends:?}")));
@@ -167,4 +162,131 @@ pub fn select_backend(choice: BackendChoice) -> Result<SelectedBackend, GpuError
         context: Some(context),
         note,
     })
+}
+
+/// What the adapter search of [`select_backend`] finds, without opening a device: whether
+/// `auto` would pick a GPU. A program can take it in a child process
+/// ([`AdapterSurvey::to_text`], [`AdapterSurvey::from_text`]), so that a machine with no
+/// hardware GPU never loads a Vulkan driver into the simulation's process (Mesa's lavapipe
+/// brings LLVM: about 50 MB of resident memory, for nothing when the CPU runs the kernels).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct AdapterSurvey {
+    /// The name of the adapter `auto` would open (a hardware one), if any.
+    pub hardware: Option<String>,
+    /// The best software adapter's name (lavapipe), when there is no hardware one.
+    pub software: Option<String>,
+    /// The wgpu backends searched (as wgpu prints them).
+    pub backends: String,
+}
+
+impl AdapterSurvey {
+    /// Enumerates the adapters as [`select_backend`] does (`WGPU_BACKEND` limits the search).
+    pub fn take() -> Self {
+        let desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        let backends = desc.backends;
+        let instance = wgpu::Instance::new(desc);
+        let mut adapters = block_on(instance.enumerate_adapters(backends));
+        adapters.sort_by_key(|a| type_rank(a.get_info().device_type));
+        let name = |a: &wgpu::Adapter| a.get_info().name;
+        let hardware = adapters
+            .iter()
+            .find(|a| a.get_info().device_type != wgpu::DeviceType::Cpu)
+            .map(name);
+        Self {
+            software: if hardware.is_none() {
+                adapters.first().map(name)
+            } else {
+                None
+            },
+            hardware,
+            backends: format!("{backends:?}"),
+        }
+    }
+
+    /// The note [`select_backend`] gives under [`BackendChoice::Auto`] when it finds no
+    /// hardware adapter (and so runs on the CPU).
+    pub fn cpu_note(&self) -> String {
+        match &self.software {
+            Some(name) => {
+                format!("{SOFTWARE_ONLY} (only the software adapter {name}); compute backend: cpu")
+            }
+            None => format!(
+                "{}; compute backend: cpu",
+                GpuError::NoAdapter(format!(" for backends {}", self.backends))
+            ),
+        }
+    }
+
+    /// The survey as lines of text (`hardware`, `software` and `backends`, each a tab and its
+    /// value; a missing adapter has no line).
+    pub fn to_text(&self) -> String {
+        let mut out = String::new();
+        let mut line = |key: &str, v: &str| {
+            // (An adapter name holds no tab or newline; one that did would lose them.)
+            let v: String = v
+                .chars()
+                .map(|c| if c.is_control() { ' ' } else { c })
+                .collect();
+            out.push_str(&format!("{key}\t{v}\n"));
+        };
+        if let Some(h) = &self.hardware {
+            line("hardware", h);
+        }
+        if let Some(s) = &self.software {
+            line("software", s);
+        }
+        line("backends", &self.backends);
+        out
+    }
+
+    /// Reads [`Self::to_text`]; `None` for anything else (no `backends` line, an unknown key).
+    pub fn from_text(text: &str) -> Option<Self> {
+        let mut survey = Self::default();
+        let mut backends = None;
+        for line in text.lines().filter(|l| !l.is_empty()) {
+            let (key, value) = line.split_once('\t')?;
+            match key {
+                "hardware" => survey.hardware = Some(value.to_string()),
+                "software" => survey.software = Some(value.to_string()),
+                "backends" => backends = Some(value.to_string()),
+                _ => return None,
+            }
+        }
+        survey.backends = backends?;
+        Some(survey)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_adapter_survey_reads_back_from_its_text() {
+        for survey in [
+            AdapterSurvey {
+                hardware: Some("NVIDIA H100".into()),
+                software: None,
+                backends: "Backends(VULKAN | GL)".into(),
+            },
+            AdapterSurvey {
+                hardware: None,
+                software: Some("llvmpipe (LLVM 15.0.6, 256 bits)".into()),
+                backends: "Backends(VULKAN)".into(),
+            },
+            AdapterSurvey {
+                hardware: None,
+                software: None,
+                backends: "Backends(DX12)".into(),
+            },
+        ] {
+            assert_eq!(AdapterSurvey::from_text(&survey.to_text()), Some(survey));
+        }
+        assert_eq!(AdapterSurvey::from_text(""), None);
+        assert_eq!(AdapterSurvey::from_text("hardware\tX\n"), None);
+        assert_eq!(AdapterSurvey::from_text("error: no such command\n"), None);
+        let none = AdapterSurvey::from_text("backends\tBackends(DX12)\n").expect("survey");
+        assert!(none.cpu_note().contains("no GPU adapter found"));
+        assert!(none.cpu_note().ends_with("compute backend: cpu"));
+    }
 }

@@ -57,7 +57,8 @@ pub mod sources_patch;
 pub mod subduction_uplift;
 
 pub use backend::{
-    BackendChoice, ComputeBackend, GpuError, SOFTWARE_ONLY, SelectedBackend, select_backend,
+    AdapterSurvey, BackendChoice, ComputeBackend, GpuError, SOFTWARE_ONLY, SelectedBackend,
+    select_backend,
 };
 pub use context::{GpuContext, GpuTraffic, Kernel, run_or_record};
 pub use helpers::{COMMON_WGSL, ROW_STRIDE, WORKGROUP_SIZE, shader_source};

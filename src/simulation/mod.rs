@@ -404,6 +404,9 @@ impl Simulation {
         if let Some(mut n) = world.get_resource_mut::<crate::systems::relief::DrainageNetwork>() {
             n.release_buffers();
         }
+        // What was freed goes back to the system, not only to the allocator (which would keep
+        // most of it resident).
+        crate::systems::resample::release_free_memory();
     }
     /// The sample graph every relief pass works on (see
     /// [`relief_graph`](crate::systems::relief::network::relief_graph)): the one the relief

@@ -130,6 +130,31 @@ fn releasing_the_work_areas_keeps_the_bits() {
     );
 }
 
+/// The release also frees the regional isostasy's coarse level (a wide flexure on a fine
+/// mesh: T_e = 200 km at 30,000 samples), and the step after builds it again: the same bits as
+/// a run that kept it.
+#[test]
+fn releasing_the_isostasys_coarse_level_keeps_the_bits() {
+    use tectonic_planets::systems::relief::ReliefState;
+    let mut p = small_params(30_000, 5);
+    p.isostasy.elastic_thickness_km = 200.0;
+    let coarse = |sim: &Simulation| {
+        sim.world()
+            .resource::<ReliefState>()
+            .isostasy_has_coarse_level()
+    };
+    let mut straight = Simulation::new(p.clone()).unwrap();
+    straight.run_steps(6).unwrap();
+    let mut sim = Simulation::new(p).unwrap();
+    sim.run_steps(3).unwrap();
+    assert!(coarse(&sim), "no coarse level to release");
+    sim.release_scratch();
+    assert!(!coarse(&sim), "the coarse level stays");
+    sim.run_steps(3).unwrap();
+    assert!(coarse(&sim));
+    assert_eq!(sim.state_hash(), straight.state_hash());
+}
+
 /// A step that resamples frees what only a resampling or only the relief passes use: the
 /// resampling's buffers once it is done, and the drainage network (stale once the samples
 /// move) before the resampling allocates its own, so the two never add up in the peak memory.

@@ -383,7 +383,8 @@ impl Simulation {
         self.app.world().resource::<StepTimings>()
     }
     /// Frees what the steps keep between them only to save allocations: the resampling's work
-    /// area, the relief passes' and the climate's, and the last step's drainage network. The
+    /// area, the relief passes' and the climate's, the isostasy's coarse level, and the last
+    /// step's drainage network. The
     /// next step builds them again, with the same results (a run that releases them halfway
     /// gives the bits of one that does not); `generate` calls it before writing its maps, to
     /// lower the peak of memory.
@@ -394,6 +395,7 @@ impl Simulation {
         }
         if let Some(mut r) = world.get_resource_mut::<crate::systems::relief::ReliefState>() {
             r.release_scratch();
+            r.release_isostasy_levels();
         }
         if let Some(mut c) = world.get_resource_mut::<crate::systems::relief::ClimateState>() {
             c.release_scratch();

@@ -456,6 +456,21 @@ impl ReliefState {
         }
     }
 
+    /// Frees the regional isostasy's levels (its coarse mesh and restriction, about 60 bytes a
+    /// sample); the next isostasy pass builds them again, the same. Not done before every
+    /// resampling with the rest ([`Self::release_scratch`]): the build takes longer than a
+    /// step's relief.
+    pub fn release_isostasy_levels(&mut self) {
+        self.iso = RegionalIsostasy::default();
+        self.iso_key = None;
+    }
+
+    /// Whether the regional isostasy works on a coarse level (see
+    /// [`Self::release_isostasy_levels`]).
+    pub fn isostasy_has_coarse_level(&self) -> bool {
+        self.iso.has_coarse_level()
+    }
+
     /// Deflection w of the lithosphere under the continents' regional load (km, positive
     /// down) from the last isostasy pass: the flexural moat beside a continent at sea, before
     /// the `isostasy.max_flexural_support_km` clamp.

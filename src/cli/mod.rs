@@ -347,7 +347,7 @@ pub(crate) fn build_sim(
 ///
 /// Under `auto` the adapters are first surveyed in a child process (this program, `planet
 /// probe-adapters`): with no hardware GPU the CPU runs, and no Vulkan driver (Mesa's lavapipe
-/// and its LLVM, about 50 MB resident) is ever loaded here. With one, or when the child cannot
+/// and its LLVM, about 55 MB resident) is ever loaded here. With one, or when the child cannot
 /// tell, the search runs here as before.
 pub(crate) fn use_backend(sim: &mut Simulation, choice: BackendChoice) -> Result<()> {
     let surveyed = (choice == BackendChoice::Auto)

@@ -111,6 +111,17 @@ fn type_rank(t: wgpu::DeviceType) -> u8 {
     }
 }
 
+/// The adapters wgpu finds (on the backends `WGPU_BACKEND` allows), hardware first, and the
+/// backends searched.
+fn sorted_adapters() -> (Vec<wgpu::Adapter>, wgpu::Backends) {
+    let desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    let backends = desc.backends;
+    let instance = wgpu::Instance::new(desc);
+    let mut adapters = block_on(instance.enumerate_adapters(backends));
+    adapters.sort_by_key(|a| type_rank(a.get_info().device_type));
+    (adapters, backends)
+}
+
 /// Picks the backend for `choice`: `Cpu` always gives the CPU; `Gpu` the best adapter wgpu finds
 /// (hardware first, then software such as lavapipe) or an error; `Auto` a hardware adapter, or
 /// the CPU with a note saying why. The `WGPU_BACKEND` environment variable limits the wgpu
@@ -123,11 +134,7 @@ pub fn select_backend(choice: BackendChoice) -> Result<SelectedBackend, GpuError
             note: "compute backend: cpu".into(),
         });
     }
-    let desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
-    let backends = desc.backends;
-    let instance = wgpu::Instance::new(desc);
-    let mut adapters = block_on(instance.enumerate_adapters(backends));
-    adapters.sort_by_key(|a| type_rank(a.get_info().device_type));
+    let (mut adapters, backends) = sorted_adapters();
     let hardware = adapters
         .iter()
         .position(|a| a.get_info().device_type != wgpu::DeviceType::Cpu);
@@ -182,11 +189,7 @@ pub struct AdapterSurvey {
 impl AdapterSurvey {
     /// Enumerates the adapters as [`select_backend`] does (`WGPU_BACKEND` limits the search).
     pub fn take() -> Self {
-        let desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
-        let backends = desc.backends;
-        let instance = wgpu::Instance::new(desc);
-        let mut adapters = block_on(instance.enumerate_adapters(backends));
-        adapters.sort_by_key(|a| type_rank(a.get_info().device_type));
+        let (adapters, backends) = sorted_adapters();
         let name = |a: &wgpu::Adapter| a.get_info().name;
         let hardware = adapters
             .iter()

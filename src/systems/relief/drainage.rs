@@ -920,6 +920,38 @@ pub fn sea_mask(
     );
 }
 
+/// Step 1 of [`sea_mask_with`] on one block of the samples, `base..base + parent.len()`: joins
+/// the samples at or below sea level along the edges inside the block (`parent` holds global
+/// indices; a root is its set's smallest sample).
+fn join_bodies(
+    g: &ReliefGraph,
+    below: &(impl Fn(usize) -> bool + Sync),
+    parent: &mut [u32],
+    base: usize,
+) {
+    let end = base + parent.len();
+    for i in base..end {
+        if !below(i) {
+            continue;
+        }
+        let mut ri = i;
+        parent[i - base] = i as u32;
+        for &j in g.neighbors_of(i) {
+            let j = j as usize;
+            if j >= i || j < base || !below(j) {
+                continue;
+            }
+            let rj = crate::geometry::union_find::find_lowest(parent, base, j - base) + base;
+            if rj < ri {
+                parent[ri - base] = rj as u32;
+                ri = rj;
+            } else if rj > ri {
+                parent[rj - base] = ri as u32;
+            }
+        }
+    }
+}
+
 /// Reusable buffers of [`sea_mask_with`] (grow to the graph size on first use).
 #[derive(Clone, Debug, Default)]
 pub struct SeaMaskScratch {
@@ -1060,22 +1092,23 @@ pub fn sea_mask_with(
     let parent = &mut s.parent[..];
     // 1. Union–find over the edges j < i between samples at or below sea level; a root is
     //    always the smallest sample of its set (the larger root is linked under the smaller).
-    for i in 0..n {
+    //    The two halves of the samples are joined on their own, in parallel, then across: the
+    //    sets, and so their roots (their smallest samples), are those of one pass over all.
+    let half = n / 2;
+    {
+        let (low, high) = parent.split_at_mut(half);
+        rayon::join(
+            || join_bodies(g, &below, low, 0),
+            || join_bodies(g, &below, high, half),
+        );
+    }
+    for i in half..n {
         if !below(i) {
             continue;
         }
-        let mut ri = i as u32;
-        parent[i] = ri;
         for &j in g.neighbors_of(i) {
-            if j as usize >= i || !below(j as usize) {
-                continue;
-            }
-            let rj = crate::geometry::union_find::find_lowest(parent, 0, j as usize) as u32;
-            if rj < ri {
-                parent[ri as usize] = rj;
-                ri = rj;
-            } else if rj > ri {
-                parent[rj as usize] = ri;
+            if (j as usize) < half && below(j as usize) {
+                crate::geometry::union_find::union_lowest(parent, 0, i, j as usize);
             }
         }
     }

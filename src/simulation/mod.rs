@@ -384,10 +384,9 @@ impl Simulation {
     }
     /// Frees what the steps keep between them only to save allocations: the resampling's work
     /// area, the relief passes' and the climate's, the isostasy's coarse level, and the last
-    /// step's drainage network. The
-    /// next step builds them again, with the same results (a run that releases them halfway
-    /// gives the bits of one that does not); `generate` calls it before writing its maps, to
-    /// lower the peak of memory.
+    /// step's drainage network. The next step builds them again, with the same results (a run
+    /// that releases them halfway gives the bits of one that does not); `generate` calls it
+    /// before writing its maps, to lower the peak of memory.
     pub fn release_scratch(&mut self) {
         let world = self.app.world_mut();
         if let Some(mut w) = world.get_resource_mut::<resample::ResampleWork>() {

@@ -72,9 +72,8 @@ impl Default for ClimateParams {
 #[derive(Clone, Debug, Default)]
 pub struct ClimateScratch {
     cost: Vec<f64>,
-    /// Bucket queue of the least-cost search: bucket `k` holds samples whose cost was in
-    /// `[k·w, (k + 1)·w)` when pushed.
-    buckets: Vec<Vec<u32>>,
+    /// Bucket queue of the least-cost search.
+    buckets: super::buckets::BucketQueue,
     land: Vec<u32>,
     /// Surface height above the sea, km (0 at sea).
     height: Vec<f32>,
@@ -214,17 +213,8 @@ pub fn precipitation_prepared(
     let width = (0.5 * (1.0 - 127.0 * a) * g.mean_spacing_km)
         .max(max_cost / 65536.0)
         .max(1e-3);
-    for b in s.buckets.iter_mut() {
-        b.clear();
-    }
-    let per_bucket = 1.0 / width;
-    let bucket = |c: f64| ((c * per_bucket) as usize).min(1 << 17);
-    let push = |buckets: &mut Vec<Vec<u32>>, k: usize, i: usize| {
-        if k >= buckets.len() {
-            buckets.resize_with(k + 1, Vec::new);
-        }
-        buckets[k].push(i as u32);
-    };
+    // (At most 2¹⁷ buckets: a cost past the cut-off is never filed.)
+    s.buckets.reset(width, 1 << 17);
     for &i in &s.land {
         let i = i as usize;
         let mut best = f64::INFINITY;
@@ -238,31 +228,23 @@ pub fn precipitation_prepared(
         }
         if best <= max_cost {
             s.cost[i] = best;
-            push(&mut s.buckets, bucket(best), i);
+            s.buckets.push(best, i as u32);
         }
     }
-    let mut k = 0;
-    while k < s.buckets.len() {
-        while let Some(i) = s.buckets[k].pop() {
-            let i = i as usize;
-            let c = s.cost[i];
-            if bucket(c) != k {
-                continue; // improved since: handled from its new bucket
+    while let Some(i) = s.buckets.pop(|i| s.cost[i]) {
+        let c = s.cost[i];
+        let hi = height[i];
+        for e in g.edges(i) {
+            let j = g.neighbors[e] as usize;
+            if j >= n || g.edge_km[e] <= 0.0 || height[j] <= 0.0 {
+                continue;
             }
-            let hi = height[i];
-            for e in g.edges(i) {
-                let j = g.neighbors[e] as usize;
-                if j >= n || g.edge_km[e] <= 0.0 || height[j] <= 0.0 {
-                    continue;
-                }
-                let cj = c + step_cost(e, hi, height[j]);
-                if cj < s.cost[j] && cj <= max_cost {
-                    s.cost[j] = cj;
-                    push(&mut s.buckets, bucket(cj), j);
-                }
+            let cj = c + step_cost(e, hi, height[j]);
+            if cj < s.cost[j] && cj <= max_cost {
+                s.cost[j] = cj;
+                s.buckets.push(cj, j as u32);
             }
         }
-        k += 1;
     }
     // 2. Raw rain (the sea: its zonal factor), then the land's mean to 1.
     out[..n].copy_from_slice(&s.zonal);

@@ -46,7 +46,7 @@ pub struct CoastScratch {
     /// The shallow samples of each chunk of the samples (gathered in parallel, then in order).
     chunks: Vec<Vec<u32>>,
     /// The bucket queue of the width search.
-    buckets: Vec<Vec<u32>>,
+    buckets: super::buckets::BucketQueue,
     lower: Vec<(u32, f32)>,
 }
 
@@ -131,56 +131,36 @@ pub fn shallow_width_km(
     let class = &s.class;
     let shallow = |i: usize| class[i] == SHALLOW;
     // Open samples next to shallow sea start the search.
-    let (width, touched, buckets) = (&mut s.width, &mut s.touched, &mut s.buckets);
-    for b in buckets.iter_mut() {
-        b.clear();
-    }
+    let (width, touched, queue) = (&mut s.width, &mut s.touched, &mut s.buckets);
     // A bucket queue over the width (buckets half a mean edge wide, at most 2¹⁶ of them),
-    // label-correcting: a sample whose width falls after it was handled goes back into the
-    // queue. So the widths are the least path sums whatever the order within a bucket: those of
-    // a Dijkstra search, as the path sums are the same additions.
-    let per_bucket = 1.0 / (0.5 * g.mean_spacing_km).max(1e-3);
-    let bucket = |d: f32| ((f64::from(d) * per_bucket) as usize).min(1 << 16);
-    let push = |buckets: &mut Vec<Vec<u32>>, k: usize, i: u32| {
-        if k >= buckets.len() {
-            buckets.resize_with(k + 1, Vec::new);
-        }
-        buckets[k].push(i);
-    };
+    // label-correcting (see [`super::buckets`]): the widths of a Dijkstra search.
+    queue.reset((0.5 * g.mean_spacing_km).max(1e-3), 1 << 16);
     for &i in &s.shallow {
         for e in g.edges(i as usize) {
             let j = g.neighbors[e];
             if class[j as usize] == OPEN && width[j as usize] != 0.0 {
                 width[j as usize] = 0.0;
                 touched.push(j);
-                push(buckets, 0, j);
+                queue.push(0.0, j);
             }
         }
     }
-    let mut k = 0;
-    while k < buckets.len() {
-        while let Some(i) = buckets[k].pop() {
-            let i = i as usize;
-            let d = width[i];
-            if bucket(d) != k {
-                continue; // lowered since: handled from its new bucket
+    while let Some(i) = queue.pop(|i| f64::from(width[i])) {
+        let d = width[i];
+        for e in g.edges(i) {
+            let j = g.neighbors[e] as usize;
+            if !shallow(j) {
+                continue;
             }
-            for e in g.edges(i) {
-                let j = g.neighbors[e] as usize;
-                if !shallow(j) {
-                    continue;
+            let dj = d + g.edge_km[e];
+            if dj < width[j] {
+                if width[j] == f32::INFINITY {
+                    touched.push(j as u32);
                 }
-                let dj = d + g.edge_km[e];
-                if dj < width[j] {
-                    if width[j] == f32::INFINITY {
-                        touched.push(j as u32);
-                    }
-                    width[j] = dj;
-                    push(buckets, bucket(dj), j as u32);
-                }
+                width[j] = dj;
+                queue.push(f64::from(dj), j as u32);
             }
         }
-        k += 1;
     }
 }
 

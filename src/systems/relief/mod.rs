@@ -41,6 +41,7 @@
 //! plates have moved, so an edge across a boundary joins samples that are no longer side by side;
 //! few rivers cross a boundary, and the next resampling puts the samples back in place.
 
+pub mod buckets;
 pub mod climate;
 pub mod coast;
 pub mod diffusion;

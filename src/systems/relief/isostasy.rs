@@ -608,11 +608,11 @@ impl CoarseLevel {
         // Coarse spacing ≈ 0.8 σ; N from the hexagonal-lattice relation area = (√3/2)·d².
         let hc = 0.8 * sigma_km;
         let nc = ((4.0 * std::f64::consts::PI * r * r) / (0.866 * hc * hc)) as usize;
-        // Worth it when that mesh is coarser than the graph by a good margin: its three or so
-        // passes, the restriction and the interpolation cost about as much as five fine passes
-        // at 1.5× coarser, where the fine level needs more than six (it was ≥ 3× coarser until
-        // the 262,144-sample planet was measured spending 17 ms a step on 17 fine passes). The
-        // kernel's shape does not depend on the graph: the coarse spacing is set by σ alone.
+        // Worth it once that mesh is 1.5× coarser than the graph: its three or so passes, the
+        // restriction and the interpolation then cost about as much as five fine passes, where
+        // the fine level needs about twelve (the rule was 3× until the 262,144-sample planet was
+        // measured spending 17–20 ms a step on 18 fine passes). The kernel's shape does not
+        // depend on the graph: the coarse spacing is set by σ alone.
         if nc < 1000 || 3 * nc > 2 * n {
             return None;
         }

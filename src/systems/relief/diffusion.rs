@@ -66,11 +66,10 @@ pub struct DiffusionScratch {
 /// (`shaders/diffusion.wgsl`).
 pub use self::diffuse_land as diffusion_cpu;
 
-/// The set-up of one call of [`diffuse_land`] (and [`diffuse_land_gpu`]):
-/// checks the inputs, and finds the explicit sub-steps (count and length, My) and the coast
-/// (ocean samples beside land, ascending) into `scratch`. None when there is nothing to
-/// diffuse (`delta_km` is then zeroed whole; otherwise past the samples only, the write-out
-/// zeroing the rest).
+/// The set-up of one call of [`diffuse_land`] (and [`diffuse_land_gpu`]): checks the inputs,
+/// and finds the explicit sub-steps (count and length, My) and the coast (ocean samples beside
+/// land, ascending) into `scratch`. None when there is nothing to diffuse (`delta_km` is then
+/// zeroed whole; otherwise only past the samples, the write-out zeroing the rest).
 #[allow(clippy::too_many_arguments)]
 fn prepare(
     g: &ReliefGraph,

@@ -569,3 +569,103 @@ fn the_fig16_script_tells_its_story() {
             .all(|e| e.cause == RiftCause::Command)
     );
 }
+
+/// A strip of continent along the equator (|lat| < 25°, lon −10°..130°) as plate 0, the rest of
+/// the sphere plate 1, both at rest; random rifts off.
+fn equatorial_strip() -> Simulation {
+    let mut p = params(20_000, 11);
+    p.rifting.frequency_per_my = 0.0;
+    let mut sim = Simulation::new(p).unwrap();
+    let mesh = sim.mesh().clone();
+    let in_strip = |q: &DVec3| {
+        let lat = q.z.asin().to_degrees();
+        let lon = q.y.atan2(q.x).to_degrees();
+        lat.abs() < 25.0 && (-10.0..130.0).contains(&lon)
+    };
+    {
+        let mut crust = sim.world_mut().resource_mut::<Crust>();
+        for (i, q) in mesh.positions.iter().enumerate() {
+            let cont = in_strip(q);
+            crust.crust_type[i] = if cont {
+                CrustType::Continental
+            } else {
+                CrustType::Oceanic
+            };
+            crust.elevation_km[i] = if cont { 0.5 } else { -4.0 };
+            crust.thickness_km[i] = if cont { 35.0 } else { 7.0 };
+            crust.age_my[i] = if cont { 500.0 } else { 60.0 };
+        }
+    }
+    let plates: Vec<u32> = mesh
+        .positions
+        .iter()
+        .map(|q| u32::from(!in_strip(q)))
+        .collect();
+    sim.reassign_plates(plates, &[(0, rest()), (1, rest())])
+        .unwrap();
+    sim
+}
+
+#[test]
+fn every_fracture_of_a_rift_into_fragments_in_a_row_opens() {
+    use tectonic_planets::systems::rifting::{Fracture, rift_plate};
+    // Four fragments in a row along the strip: with equal speeds away from the other
+    // fragments, the two at each end moved the same way and their fracture did not open.
+    let centroids: Vec<DVec3> = [5.0f64, 40.0, 80.0, 115.0]
+        .iter()
+        .map(|&lon| from_lat_lon_deg(0.0, lon))
+        .collect();
+    for jitter_seed in 0..8u64 {
+        let mut sim = equatorial_strip();
+        let div = sim.params().rifting.divergence_speed_mm_per_yr / sim.params().planet.radius_km;
+        let fracture = Fracture::Voronoi {
+            centroids: centroids.clone(),
+            warp_seed: 3,
+        };
+        let ids = rift_plate(
+            sim.world_mut(),
+            0,
+            &fracture,
+            jitter_seed,
+            RiftCause::Command,
+        )
+        .expect("the strip rifts");
+        assert_eq!(ids.len(), 4);
+        let mesh = sim.mesh().clone();
+        let crust = sim.crust().clone();
+        // Each fragment's centroid and angular velocity, west to east.
+        let mut frags: Vec<(DVec3, DVec3)> = ids
+            .iter()
+            .map(|&id| {
+                let c: DVec3 = (0..mesh.len())
+                    .filter(|&i| crust.plate[i] == id)
+                    .map(|i| mesh.positions[i] * mesh.area_km2[i])
+                    .sum();
+                let m = sim
+                    .world_mut()
+                    .query::<(&Plate, &PlateMotion)>()
+                    .iter(sim.world())
+                    .find(|(p, _)| p.id.0 == id)
+                    .map(|(_, m)| *m)
+                    .expect("fragment plate");
+                (c.normalize(), m.euler_pole * m.angular_speed_rad_per_my)
+            })
+            .collect();
+        frags.sort_by(|a, b| a.0.y.atan2(a.0.x).total_cmp(&b.0.y.atan2(b.0.x)));
+        for w in frags.windows(2) {
+            let ((ca, wa), (cb, wb)) = (w[0], w[1]);
+            // On the fracture between them, the eastern fragment's velocity relative to the
+            // western one, along the direction from west to east.
+            let p = (ca + cb).normalize();
+            let east = (cb - ca - p * p.dot(cb - ca)).normalize();
+            let opening = (wb - wa).cross(p).dot(east);
+            assert!(
+                opening > 0.5 * div,
+                "jitter seed {jitter_seed}: the fracture near longitude {:.0}° opens at {:.2} of \
+                 the divergence speed",
+                p.y.atan2(p.x).to_degrees(),
+                opening / div
+            );
+        }
+    }
+}

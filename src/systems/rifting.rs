@@ -23,9 +23,11 @@
 //! is displaced by vector noise (`rifting.fracture_warp_km`), which makes the fracture lines
 //! irregular. The fragment with the largest area keeps the plate's id and entity; the others
 //! become new plates. Each fragment's angular velocity is the parent's plus a rotation that moves
-//! its centroid straight away from the other fragments' centroid at `rifting.divergence_speed_mm_per_yr`
-//! (direction jittered by up to ±20°): the fragments separate at once (the paper's "direct
-//! divergence", §7.5) and the gap between them fills with ridge crust at the next resamplings.
+//! its centroid straight away from the parent's centroid (direction jittered by up to ±20°), at a
+//! speed in proportion to its distance from it, `rifting.divergence_speed_mm_per_yr` on average:
+//! the plate stretches, so every fracture opens, and the fragments separate at once (the paper's
+//! "direct divergence", §7.5); the gaps between them fill with ridge crust at the next
+//! resamplings.
 //!
 //! Fragments share the parent's frame, so nothing moves at the moment of the rift; the rift asks
 //! for a resampling, which (in the same step, after the Rifting set) rebuilds fronts and terranes
@@ -325,17 +327,16 @@ pub fn rift_plate(
             crust.plate[s as usize] = id_of_label[l as usize];
         }
     });
-    // Motions: parent's angular velocity plus a divergence away from the parent's centroid.
+    // Motions: the parent's angular velocity plus a stretch of the plate about its centroid.
     let world_from_plate = frame.world_from_plate;
     let omega_parent = motion.euler_pole * motion.angular_speed_rad_per_my;
     let div = params.rifting.divergence_speed_mm_per_yr / params.planet.radius_km;
+    let stretch = stretch_factors(&centroid, &order, parent_centroid);
+    let pc = world_from_plate * parent_centroid;
     let mut rng = SimRng::new(jitter_seed, stream::RIFT);
     let mut motions = Vec::with_capacity(order.len());
-    for &l in &order {
+    for (&l, &f) in order.iter().zip(&stretch) {
         let c = world_from_plate * centroid[l].normalize_or(parent_centroid);
-        // Away from the other fragments (their area-weighted centroid).
-        let others: DVec3 = (0..k).filter(|&m| m != l).map(|m| centroid[m]).sum();
-        let pc = world_from_plate * others.normalize_or(parent_centroid);
         let mut t = c * c.dot(pc) - pc;
         if t.length_squared() < 1e-18 {
             t = tangent_basis(c).0;
@@ -343,7 +344,7 @@ pub fn rift_plate(
         let t = t.normalize();
         let jitter = (rng.next_f64() * 2.0 - 1.0) * 20f64.to_radians();
         let t = DQuat::from_axis_angle(c, jitter) * t;
-        let omega = omega_parent + c.cross(t) * div;
+        let omega = omega_parent + c.cross(t) * (div * f);
         let speed = omega.length();
         motions.push(PlateMotion {
             euler_pole: if speed > 0.0 { omega / speed } else { DVec3::Z },
@@ -401,6 +402,27 @@ pub fn rift_plate(
             elapsed_ms,
         });
     Ok(ids)
+}
+
+/// Speed of each fragment of `order` away from the parent's centroid `parent_centroid` (unit), as
+/// a multiple of `rifting.divergence_speed_mm_per_yr`: in proportion to the angular distance of
+/// the fragment's centroid (`centroid[l]`, area-weighted sums) from it, scaled so that the
+/// fragments' mean is 1. The plate stretches evenly, so every fracture between two fragments
+/// opens. Two fragments separate at twice the divergence speed, as when each moved at that speed.
+/// A rule of equal speeds away from the other fragments did not open every fracture: with three
+/// or four fragments in a row, two neighbours at one end moved the same way at the same speed,
+/// and their fracture stayed a narrow seaway that never widened (or closed into a front inside the
+/// continent). When the centroids all coincide, every fragment gets 1.
+fn stretch_factors(centroid: &[DVec3], order: &[usize], parent_centroid: DVec3) -> Vec<f64> {
+    let d: Vec<f64> = order
+        .iter()
+        .map(|&l| angle_between(centroid[l].normalize_or(parent_centroid), parent_centroid))
+        .collect();
+    let mean = d.iter().sum::<f64>() / d.len().max(1) as f64;
+    if mean <= 1e-12 {
+        return vec![1.0; d.len()];
+    }
+    d.iter().map(|&x| x / mean).collect()
 }
 
 /// Thins the continental crust of a plate about to break along the new fracture lines:

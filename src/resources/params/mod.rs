@@ -343,7 +343,7 @@ define_params! {
         oceanic_factor: f64 = 0.2, 0.0..=1.0, "", "f(0): the rifting rate of an all-oceanic plate relative to an all-continental one; f(x) = f(0) + (1 − f(0))·x for a continental share x.";
         min_plate_area_km2: f64 = 6.0e6, 0.0..=1e9, "km²", "Plates smaller than this never rift on their own.";
         max_fragments: u64 = 4, 2..=4, "", "A random rift splits a plate into 2 to this many fragments (paper: n ∈ [2, 4]).";
-        divergence_speed_mm_per_yr: f64 = 25.0, 0.0..=1000.0, "mm/yr", "Speed at which each fragment moves away from the parent's centroid, added to the parent's own motion.";
+        divergence_speed_mm_per_yr: f64 = 25.0, 0.0..=1000.0, "mm/yr", "Mean speed at which the fragments move away from the parent's centroid (each in proportion to its distance from it, so every fracture opens), added to the parent's own motion.";
         fracture_warp_km: f64 = 400.0, 0.0..=3000.0, "km", "Amplitude of the noise that warps the Voronoi borders between fragments into irregular fracture lines.";
         fracture_wavelength_km: f64 = 2500.0, 100.0..=40000.0, "km", "Wavelength of the fracture-warping noise.";
         margin_thinning_km: f64 = 12.0, 0.0..=100.0, "km", "Continental crust is thinned by this much at a new rift (stretching), less away from it, so a rifted margin steps down to the sea instead of ending in a cliff; never below 5 km.";

@@ -34,6 +34,74 @@ pub fn union_lowest(parent: &mut [u32], base: usize, a: usize, b: usize) -> usiz
     lo
 }
 
+/// Joins the connected components of the samples for which `member` holds, over a symmetric
+/// adjacency in CSR form (`neighbor_start`, `neighbors`, as the mesh and the relief graph hold
+/// it). Afterwards [`find_lowest`] (base 0) gives each member's component as its lowest member;
+/// the entries of other samples are left as they were. `parent` holds one entry per sample.
+///
+/// The two halves of the samples are joined on their own, in parallel, then across: the sets,
+/// and so their roots, are those of one pass over all, whatever the thread count. Every link
+/// points to a lower sample, so one pass in index order labels every member with a single read:
+/// at member `i`, `parent[i]` is `i` (a root) or a lower member, already labelled with its root.
+pub fn join_components(
+    neighbor_start: &[u32],
+    neighbors: &[u32],
+    member: &(impl Fn(usize) -> bool + Sync),
+    parent: &mut [u32],
+) {
+    let n = parent.len();
+    let half = n / 2;
+    {
+        let (low, high) = parent.split_at_mut(half);
+        rayon::join(
+            || join_block(neighbor_start, neighbors, member, low, 0),
+            || join_block(neighbor_start, neighbors, member, high, half),
+        );
+    }
+    for i in half..n {
+        if !member(i) {
+            continue;
+        }
+        for &j in &neighbors[neighbor_start[i] as usize..neighbor_start[i + 1] as usize] {
+            if (j as usize) < half && member(j as usize) {
+                union_lowest(parent, 0, i, j as usize);
+            }
+        }
+    }
+}
+
+/// [`join_components`] on one block of the samples, `base..base + parent.len()`, along the
+/// edges inside the block (`parent` holds global indices).
+fn join_block(
+    neighbor_start: &[u32],
+    neighbors: &[u32],
+    member: &(impl Fn(usize) -> bool + Sync),
+    parent: &mut [u32],
+    base: usize,
+) {
+    let end = base + parent.len();
+    for i in base..end {
+        if !member(i) {
+            continue;
+        }
+        let mut ri = i;
+        parent[i - base] = i as u32;
+        for &j in &neighbors[neighbor_start[i] as usize..neighbor_start[i + 1] as usize] {
+            let j = j as usize;
+            if j >= i || j < base || !member(j) {
+                continue;
+            }
+            let rj = find_lowest(parent, base, j - base) + base;
+            if rj < ri {
+                parent[ri - base] = rj as u32;
+                ri = rj;
+            } else if rj > ri {
+                parent[rj - base] = ri as u32;
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

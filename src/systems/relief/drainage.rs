@@ -920,38 +920,6 @@ pub fn sea_mask(
     );
 }
 
-/// Step 1 of [`sea_mask_with`] on one block of the samples, `base..base + parent.len()`: joins
-/// the samples at or below sea level along the edges inside the block (`parent` holds global
-/// indices; a root is its set's smallest sample).
-fn join_bodies(
-    g: &ReliefGraph,
-    below: &(impl Fn(usize) -> bool + Sync),
-    parent: &mut [u32],
-    base: usize,
-) {
-    let end = base + parent.len();
-    for i in base..end {
-        if !below(i) {
-            continue;
-        }
-        let mut ri = i;
-        parent[i - base] = i as u32;
-        for &j in g.neighbors_of(i) {
-            let j = j as usize;
-            if j >= i || j < base || !below(j) {
-                continue;
-            }
-            let rj = crate::geometry::union_find::find_lowest(parent, base, j - base) + base;
-            if rj < ri {
-                parent[ri - base] = rj as u32;
-                ri = rj;
-            } else if rj > ri {
-                parent[rj - base] = ri as u32;
-            }
-        }
-    }
-}
-
 /// Reusable buffers of [`sea_mask_with`] (grow to the graph size on first use).
 #[derive(Clone, Debug, Default)]
 pub struct SeaMaskScratch {
@@ -1094,24 +1062,7 @@ pub fn sea_mask_with(
     //    always the smallest sample of its set (the larger root is linked under the smaller).
     //    The two halves of the samples are joined on their own, in parallel, then across: the
     //    sets, and so their roots (their smallest samples), are those of one pass over all.
-    let half = n / 2;
-    {
-        let (low, high) = parent.split_at_mut(half);
-        rayon::join(
-            || join_bodies(g, &below, low, 0),
-            || join_bodies(g, &below, high, half),
-        );
-    }
-    for i in half..n {
-        if !below(i) {
-            continue;
-        }
-        for &j in g.neighbors_of(i) {
-            if (j as usize) < half && below(j as usize) {
-                crate::geometry::union_find::union_lowest(parent, 0, i, j as usize);
-            }
-        }
-    }
+    crate::geometry::union_find::join_components(&g.neighbor_start, &g.neighbors, &below, parent);
     // 2. Label every sample with its body and sum the bodies in index order; a body's
     //    smallest sample comes first. Links only ever point to smaller samples, so the sample
     //    `i` points to was labelled before it: its label is `i`'s root, one read away.

@@ -327,7 +327,7 @@ mod tests {
             (500.0, 30.0, -120.0),
             // Across the plates' border: on two plates, beside the other plate's continent.
             (300.0, 0.0, 0.0),
-            // Beside the border, on plate 0 only, touching plate 1's continent.
+            // At the border further south, touching plate 1's continent.
             (200.0, -40.0, 1.5),
         ];
         for (i, q) in mesh.positions.iter().enumerate() {

@@ -377,10 +377,10 @@ pub fn initial_planet(mesh: &SphereMesh, params: &Params) -> (Crust, Vec<Initial
                 *ct = CrustType::Continental;
                 // The crust that stands at this elevation under Airy isostasy (so that isostasy,
                 // when on, keeps the initial relief), thinned toward the coast like a rifted
-                // margin (rifting.margin_thinning_km at the coastline).
+                // margin (init.margin_thinning_km at the coastline).
                 let taper = 1.0 - smoothstep(0.0, 0.1, h);
                 *e = (iso.reference_thickness_km + (zc - iso.reference_elevation_km) / gain
-                    - params.rifting.margin_thinning_km * taper * taper)
+                    - params.init.margin_thinning_km * taper * taper)
                     .max(5.0) as f32;
                 *age = (1500.0 + 500.0 * fbm(aseed, p, cont_wl, 3)) as f32;
             } else {

@@ -218,6 +218,7 @@ define_params! {
         oceanic_elevation_km: f64 = -4.0, -10.0..=0.0, "km", "Mean initial elevation of oceanic crust (Driftworld z_0t and its average ocean depth).";
         elevation_noise_km: f64 = 0.4, 0.0..=5.0, "km", "Amplitude of the low-frequency noise on initial elevations.";
         continental_thickness_km: f64 = 35.0, 1.0..=100.0, "km", "Initial thickness of continental crust.";
+        margin_thinning_km: f64 = 12.0, 0.0..=100.0, "km", "The first continents' crust is thinned by this much at the coastline, less inland (like a rifted margin), so their coasts step down to the sea instead of ending in a cliff; never below 5 km. (Until 2026-12-06 rifting.margin_thinning_km set it.)";
         oceanic_thickness_km: f64 = 7.0, 1.0..=100.0, "km", "Thickness of oceanic crust, initial and newly formed (Driftworld's basic thickness e_0).";
         flood_fill: bool = false, false..=true, "", "Start method: false = warped Voronoi plates with continents from a noise field; true = plates grown from their seed points over the sample graph (seed 003), in an order drawn from a noise field on positions (so every resolution grows the same plates), each plate continental or oceanic as a whole (plates in a random order are continental until continental_fraction of the area is). CLI: --init voronoi|flood-fill.";
         flood_fill_roughness: f64 = 1.0, 0.0..=5.0, "", "Flood fill: how much the growth speed varies from place to place (cost of a km = exp(roughness × noise)); 0 grows plain geodesic Voronoi cells, larger values more ragged plates.";
@@ -346,7 +347,7 @@ define_params! {
         divergence_speed_mm_per_yr: f64 = 25.0, 0.0..=1000.0, "mm/yr", "Mean speed at which the fragments move away from the parent's centroid (each in proportion to its distance from it, so every fracture opens), added to the parent's own motion.";
         fracture_warp_km: f64 = 400.0, 0.0..=3000.0, "km", "Amplitude of the noise that warps the Voronoi borders between fragments into irregular fracture lines.";
         fracture_wavelength_km: f64 = 2500.0, 100.0..=40000.0, "km", "Wavelength of the fracture-warping noise.";
-        margin_thinning_km: f64 = 12.0, 0.0..=100.0, "km", "Continental crust is thinned by this much at a new rift (stretching), less away from it, so a rifted margin steps down to the sea instead of ending in a cliff; never below 5 km.";
+        margin_thinning_km: f64 = 12.0, 0.0..=100.0, "km", "Continental crust is thinned by this much at a new rift (stretching), less away from it, so a rifted margin steps down to the sea instead of ending in a cliff; never below 5 km. Where the fragments do not part for good, the thinned strips stay in the continent as narrow troughs (docs/relief.md).";
         margin_width_km: f64 = 200.0, 1.0..=3000.0, "km", "Width of the thinned margin on each side of a rift: the thinning falls as (1 − d/w)².";
     }
     /// Global resampling.

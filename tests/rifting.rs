@@ -25,16 +25,30 @@ fn rest() -> PlateMotion {
 /// Two plates at rest: 0 covers everything north of 30° S, 1 the southern cap. Plate 0 is
 /// continental between 0° and 60° N, oceanic elsewhere. Random rifts off.
 fn two_plates(samples: u64) -> Simulation {
+    let south = -(30f64.to_radians().sin());
+    two_plates_at_rest(
+        samples,
+        |q| (0.0..60.0).contains(&q.z.asin().to_degrees()),
+        |q| q.z >= south,
+    )
+}
+
+/// Two plates at rest, random rifts off: plate 0 where `on_plate_0` holds, plate 1 elsewhere;
+/// continental crust (0.5 km, 35 km thick, 500 My) where `continental` holds, ocean floor
+/// (−4 km, 7 km, 60 My) elsewhere.
+fn two_plates_at_rest(
+    samples: u64,
+    continental: impl Fn(&DVec3) -> bool,
+    on_plate_0: impl Fn(&DVec3) -> bool,
+) -> Simulation {
     let mut p = params(samples, 11);
     p.rifting.frequency_per_my = 0.0;
     let mut sim = Simulation::new(p).unwrap();
     let mesh = sim.mesh().clone();
-    let south = -(30f64.to_radians().sin());
     {
         let mut crust = sim.world_mut().resource_mut::<Crust>();
         for (i, q) in mesh.positions.iter().enumerate() {
-            let lat = q.z.asin().to_degrees();
-            let cont = (0.0..60.0).contains(&lat);
+            let cont = continental(q);
             crust.crust_type[i] = if cont {
                 CrustType::Continental
             } else {
@@ -48,7 +62,7 @@ fn two_plates(samples: u64) -> Simulation {
     let plates: Vec<u32> = mesh
         .positions
         .iter()
-        .map(|q| if q.z >= south { 0 } else { 1 })
+        .map(|q| u32::from(!on_plate_0(q)))
         .collect();
     sim.reassign_plates(plates, &[(0, rest()), (1, rest())])
         .unwrap();
@@ -573,37 +587,12 @@ fn the_fig16_script_tells_its_story() {
 /// A strip of continent along the equator (|lat| < 25°, lon −10°..130°) as plate 0, the rest of
 /// the sphere plate 1, both at rest; random rifts off.
 fn equatorial_strip() -> Simulation {
-    let mut p = params(20_000, 11);
-    p.rifting.frequency_per_my = 0.0;
-    let mut sim = Simulation::new(p).unwrap();
-    let mesh = sim.mesh().clone();
     let in_strip = |q: &DVec3| {
         let lat = q.z.asin().to_degrees();
         let lon = q.y.atan2(q.x).to_degrees();
         lat.abs() < 25.0 && (-10.0..130.0).contains(&lon)
     };
-    {
-        let mut crust = sim.world_mut().resource_mut::<Crust>();
-        for (i, q) in mesh.positions.iter().enumerate() {
-            let cont = in_strip(q);
-            crust.crust_type[i] = if cont {
-                CrustType::Continental
-            } else {
-                CrustType::Oceanic
-            };
-            crust.elevation_km[i] = if cont { 0.5 } else { -4.0 };
-            crust.thickness_km[i] = if cont { 35.0 } else { 7.0 };
-            crust.age_my[i] = if cont { 500.0 } else { 60.0 };
-        }
-    }
-    let plates: Vec<u32> = mesh
-        .positions
-        .iter()
-        .map(|q| u32::from(!in_strip(q)))
-        .collect();
-    sim.reassign_plates(plates, &[(0, rest()), (1, rest())])
-        .unwrap();
-    sim
+    two_plates_at_rest(20_000, in_strip, in_strip)
 }
 
 #[test]

@@ -171,12 +171,14 @@ fn trapped_components(mesh: &SphereMesh, crust: &Crust, limit_km2: f64) -> Vec<V
     drop(parent);
     let margin = 1.0 + 4.0 * n as f64 * f64::EPSILON;
     let mut trapped = Vec::new();
-    let mut seen = vec![false; n];
+    // (Allocated at the first candidate: most resamplings have none.)
+    let mut seen = Vec::new();
     for &(root, area, passes) in &comps {
-        if passes
-            && area < limit_km2 * margin
-            && let Some(comp) = trapped_from(mesh, crust, root, limit_km2, &mut seen)
-        {
+        if !passes || area >= limit_km2 * margin {
+            continue;
+        }
+        seen.resize(n, false);
+        if let Some(comp) = trapped_from(mesh, crust, root, limit_km2, &mut seen) {
             trapped.push(comp);
         }
     }

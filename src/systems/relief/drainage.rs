@@ -1058,10 +1058,8 @@ pub fn sea_mask_with(
     s.area.resize(n, 0.0);
     s.flags.resize(n, 0);
     let parent = &mut s.parent[..];
-    // 1. Union–find over the edges j < i between samples at or below sea level; a root is
-    //    always the smallest sample of its set (the larger root is linked under the smaller).
-    //    The two halves of the samples are joined on their own, in parallel, then across: the
-    //    sets, and so their roots (their smallest samples), are those of one pass over all.
+    // 1. The bodies: the connected sets of samples at or below sea level, each rooted at its
+    //    smallest sample (see `join_components`).
     crate::geometry::union_find::join_components(&g.neighbor_start, &g.neighbors, &below, parent);
     // 2. Label every sample with its body and sum the bodies in index order; a body's
     //    smallest sample comes first. Links only ever point to smaller samples, so the sample

@@ -378,6 +378,47 @@ fn random_rifts_happen_at_their_rate_and_split_large_plates() {
     assert!(off.world().resource::<RiftLog>().events.is_empty());
 }
 
+/// Random rifts happen on the steps that end with a resampling that was due anyway (at least
+/// `resample.min_interval_steps` since the last one), so they add none: a rift drawn on any step
+/// forced one of its own.
+#[test]
+fn random_rifts_wait_for_the_resampling_that_was_due() {
+    let mut p = params(10_000, 5);
+    p.rifting.frequency_per_my = 0.1;
+    let min = p.resample.min_interval_steps;
+    let mut sim = Simulation::new(p).unwrap();
+    let mut rift_steps = 0;
+    for _ in 0..60 {
+        let (step, since, resamplings) = (
+            sim.clock().step,
+            sim.clock().steps_since_resample,
+            sim.clock().resamplings,
+        );
+        sim.step().unwrap();
+        let rifted = sim
+            .world()
+            .resource::<RiftLog>()
+            .events
+            .iter()
+            .any(|e| e.step == step && e.cause == RiftCause::Random);
+        if !rifted {
+            continue;
+        }
+        rift_steps += 1;
+        assert_eq!(
+            sim.clock().resamplings,
+            resamplings + 1,
+            "step {step}: a random rift without a resampling"
+        );
+        assert!(
+            since + 1 >= min,
+            "step {step}: a random rift {} steps after the last resampling forced one of its own",
+            since + 1
+        );
+    }
+    assert!(rift_steps >= 2, "only {rift_steps} steps with random rifts");
+}
+
 #[test]
 fn replaying_the_recorded_history_gives_the_same_planet() {
     let mut p = params(15_000, 21);
@@ -402,7 +443,7 @@ fn replaying_the_recorded_history_gives_the_same_planet() {
             lat: -20.0,
             lon: 60.0,
         }),
-        fragments: 3,
+        fragments: 2,
     })
     .unwrap();
     sim.apply(&Command::Uplift {

@@ -5,6 +5,7 @@
 use bevy_app::{App, Plugin};
 use bevy_ecs::prelude::*;
 
+use super::resample::RESAMPLE;
 use super::schedule::{
     Phenomenon, PhenomenonAppExt, TectonicStep, TectonicSystems, phenomenon_enabled,
 };
@@ -26,9 +27,15 @@ impl Plugin for RiftingPlugin {
             "large plates break into diverging fragments",
         );
         app.init_resource::<rifting::RiftLog>();
+        // Random rifts happen on the steps that end with a resampling (which rebuilds the
+        // fragments' fronts and terranes), or every step when the resampling is off.
         app.add_systems(
             TectonicStep,
-            rifting::rift_plates
+            (
+                rifting::rift_plates.run_if(phenomenon_enabled(RESAMPLE)),
+                rifting::rift_plates_every_step.run_if(not(phenomenon_enabled(RESAMPLE))),
+            )
+                .chain()
                 .in_set(TectonicSystems::Rifting)
                 .run_if(phenomenon_enabled(RIFTING)),
         );

@@ -29,9 +29,13 @@
 //! "direct divergence", §7.5); the gaps between them fill with ridge crust at the next
 //! resamplings.
 //!
-//! Fragments share the parent's frame, so nothing moves at the moment of the rift; the rift asks
-//! for a resampling, which (in the same step, after the Rifting set) rebuilds fronts and terranes
-//! for the new plates.
+//! **When.** Random rifts are drawn on the steps that end with a global resampling, over the steps
+//! since the last one (their number Poisson with mean steps·Σλ, at most one per plate), and
+//! carried out there: fragments share the parent's frame, so nothing moves at the moment of the
+//! rift, and the resampling that follows in the same step (after the Rifting set) rebuilds fronts
+//! and terranes for the new plates. (Drawn every step, each rift forced a resampling of its own:
+//! three of the default run's fourteen.) With the resampling off they are drawn every step. A
+//! rift asked for by a command happens at once and asks for a resampling.
 
 use bevy_ecs::prelude::*;
 use glam::{DQuat, DVec3};
@@ -573,11 +577,47 @@ pub fn random_rift(
     rift_plate(world, id, &fracture, rng.next_u64(), cause)
 }
 
-/// The Rifting set's system: draws this step's rift from the plates' Poisson processes and
-/// carries it out.
+/// The Rifting set's system (with the resampling on): on a step that ends with a global
+/// resampling, draws the random rifts of the steps since the last one and carries them out, so
+/// the resampling that was due anyway rebuilds fronts and terranes for the fragments. On the other
+/// steps it does nothing. A rift drawn on any step would force a resampling of its own (the
+/// fragments need their fronts and terranes), which put three resamplings more into the default
+/// 250 My run; carried out at the next resampling instead, a rift waits at most
+/// `resample.max_interval_steps` steps (about ten at the defaults), which a Poisson process of
+/// tens of millions of years does not notice.
 pub fn rift_plates(world: &mut World) {
+    // The clock advances (in the Aging set) between this set and the resampling's.
+    let steps = world.resource::<SimClock>().steps_since_resample + 1;
+    let requested = world.resource::<ResampleRequest>().0;
+    let max_angle = world
+        .query::<&PlateFrame>()
+        .iter(world)
+        .map(|f| f.angle_rad())
+        .fold(0.0, f64::max);
+    let due = crate::systems::resample::resample_due_after(
+        steps,
+        world.resource::<Params>(),
+        requested,
+        max_angle,
+    );
+    if due {
+        draw_rifts(world, steps);
+    }
+}
+
+/// The Rifting set's system with the resampling off: each step draws its own rifts (each one
+/// asks for a resampling that will not come; the fragments keep the fronts of their parent).
+pub fn rift_plates_every_step(world: &mut World) {
+    draw_rifts(world, 1);
+}
+
+/// Draws the random rifts of the last `steps` steps from the plates' Poisson processes (their
+/// rates now) and carries them out: their number is Poisson with mean `steps`·Σλ, at most one
+/// per plate, each plate picked in proportion to its rate. Over one step with at most one rift,
+/// the draws are those of a rift a step.
+fn draw_rifts(world: &mut World, steps: u64) {
     let params = world.resource::<Params>();
-    if params.rifting.frequency_per_my <= 0.0 {
+    if params.rifting.frequency_per_my <= 0.0 || steps == 0 {
         return;
     }
     let seed = params.planet.seed;
@@ -599,27 +639,48 @@ pub fn rift_plates(world: &mut World) {
             .collect()
     };
     rates.sort_by_key(|r| r.0);
-    let total: f64 = rates.iter().map(|r| r.1).sum();
-    if total <= 0.0 {
+    let mean = rates.iter().map(|r| r.1).sum::<f64>() * steps as f64;
+    if mean <= 0.0 {
         return;
     }
     let mut rng = SimRng::new(hash3(seed, stream::RIFT, step), stream::RIFT);
-    if rng.next_f64() >= 1.0 - (-total).exp() {
-        return;
-    }
-    let mut pick = rng.next_f64() * total;
-    let mut chosen = rates[rates.len() - 1].0;
-    for &(id, l) in &rates {
-        if pick < l {
-            chosen = id;
-            break;
+    let count = poisson_count(rng.next_f64(), mean, rates.len());
+    for _ in 0..count {
+        let total: f64 = rates.iter().map(|r| r.1).sum();
+        let mut pick = rng.next_f64() * total;
+        let mut at = rates.len() - 1;
+        for (k, &(_, l)) in rates.iter().enumerate() {
+            if pick < l {
+                at = k;
+                break;
+            }
+            pick -= l;
         }
-        pick -= l;
+        let (chosen, _) = rates.remove(at);
+        if let Err(e) = random_rift(world, chosen, None, rng.next_u64(), RiftCause::Random) {
+            // A plate too small or too oddly shaped for its fragments: no rift this time.
+            tracing::debug!(plate = chosen, "random rift skipped: {e}");
+        }
     }
-    if let Err(e) = random_rift(world, chosen, None, rng.next_u64(), RiftCause::Random) {
-        // A plate too small or too oddly shaped for its fragments: no rift this time.
-        tracing::debug!(plate = chosen, "random rift skipped: {e}");
+}
+
+/// The number of events of a Poisson process of mean `mean` that the uniform draw `u` (in
+/// [0, 1)) gives, at most `max`: at least k when `u` < P(K ≥ k), so a draw below
+/// 1 − e^(−mean) gives at least one.
+pub fn poisson_count(u: f64, mean: f64, max: usize) -> usize {
+    if !(mean > 0.0) {
+        return 0;
     }
+    // P(K ≥ k) = 1 − P(K ≤ k − 1), with P(K = k) = e^(−mean)·mean^k / k!.
+    let mut term = (-mean).exp();
+    let mut at_most = term;
+    let mut k = 0;
+    while k < max && u < 1.0 - at_most {
+        k += 1;
+        term *= mean / k as f64;
+        at_most += term;
+    }
+    k
 }
 
 /// The continental share of a set of samples, for diagnostics and tests.
@@ -633,4 +694,33 @@ pub fn continental_share(mesh: &SphereMesh, crust: &Crust, samples: &[u32]) -> f
         }
     }
     if t > 0.0 { c / t } else { 0.0 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn poisson_count_draws_the_poisson_distribution() {
+        assert_eq!(poisson_count(0.0, 0.0, 5), 0);
+        assert_eq!(poisson_count(0.5, f64::NAN, 5), 0);
+        // At least one rift exactly below 1 − e^(−mean), as one draw a step did.
+        let m: f64 = 0.3;
+        let p1 = 1.0 - (-m).exp();
+        assert_eq!(poisson_count(p1 - 1e-12, m, 5), 1);
+        assert_eq!(poisson_count(p1 + 1e-12, m, 5), 0);
+        // Over a uniform grid of draws: the law's mean and P(K = 2), and the cap.
+        for mean in [0.05, 0.3, 2.0] {
+            let n = 200_000;
+            let counts: Vec<usize> = (0..n)
+                .map(|k| poisson_count((k as f64 + 0.5) / n as f64, mean, 50))
+                .collect();
+            let avg = counts.iter().sum::<usize>() as f64 / n as f64;
+            assert!((avg - mean).abs() < 1e-3 * mean.max(1.0), "{mean}: {avg}");
+            let two = counts.iter().filter(|&&c| c == 2).count() as f64 / n as f64;
+            let law = (-mean).exp() * mean * mean / 2.0;
+            assert!((two - law).abs() < 1e-4, "{mean}: {two} against {law}");
+        }
+        assert_eq!(poisson_count(0.0, 50.0, 3), 3);
+    }
 }

@@ -340,7 +340,7 @@ define_params! {
     }
     /// Plate rifting.
     [rifting] Rifting {
-        frequency_per_my: f64 = 0.002, 0.0..=10.0, "1/My", "Rifting rate λ0: expected rifting events per My of an all-continental plate of the reference area A0 = planet area / init.plates. A plate rifts during a step with probability 1 − exp(−λ), λ = λ0·δt·f(x)·A/A0 (see systems::rifting).";
+        frequency_per_my: f64 = 0.002, 0.0..=10.0, "1/My", "Rifting rate λ0: expected rifting events per My of an all-continental plate of the reference area A0 = planet area / init.plates. Each plate is a Poisson process of λ = λ0·δt·f(x)·A/A0 rifts a step; the rifts of the steps since the last resampling are drawn and carried out on the step that ends with the next one (see systems::rifting).";
         oceanic_factor: f64 = 0.2, 0.0..=1.0, "", "f(0): the rifting rate of an all-oceanic plate relative to an all-continental one; f(x) = f(0) + (1 − f(0))·x for a continental share x.";
         min_plate_area_km2: f64 = 6.0e6, 0.0..=1e9, "km²", "Plates smaller than this never rift on their own.";
         max_fragments: u64 = 4, 2..=4, "", "A random rift splits a plate into 2 to this many fragments (paper: n ∈ [2, 4]).";

@@ -91,10 +91,27 @@ pub fn resample_due(
     request: Res<ResampleRequest>,
     frames: Query<&PlateFrame>,
 ) -> bool {
-    if request.0 {
+    resample_due_after(
+        clock.steps_since_resample,
+        &params,
+        request.0,
+        frames.iter().map(|f| f.angle_rad()).fold(0.0, f64::max),
+    )
+}
+
+/// Whether a resampling is due after `steps` steps since the last one, with a resampling asked
+/// for (`requested`) or not, and the fastest plate turned by `max_angle_rad` since: the rule of
+/// [`resample_due`], for what must know it before the clock advances (random rifts, which
+/// happen only on the steps that end with a resampling).
+pub fn resample_due_after(
+    steps: u64,
+    params: &Params,
+    requested: bool,
+    max_angle_rad: f64,
+) -> bool {
+    if requested {
         return true;
     }
-    let steps = clock.steps_since_resample;
     let (min_steps, max_steps) = (
         params.resample.min_interval_steps,
         params.resample.max_interval_steps,
@@ -105,8 +122,7 @@ pub fn resample_due(
     if steps < min_steps {
         return false;
     }
-    let max_angle = frames.iter().map(|f| f.angle_rad()).fold(0.0, f64::max);
-    max_angle * params.planet.radius_km >= params.resample.adaptive_displacement_km
+    max_angle_rad * params.planet.radius_km >= params.resample.adaptive_displacement_km
 }
 
 /// First system of a resampling: locates every sample in the moved plates (on the GPU when a

@@ -433,7 +433,8 @@ fn stretch_factors(centroid: &[DVec3], order: &[usize], parent_centroid: DVec3) 
 /// `rifting.margin_thinning_km·(1 − d/w)²` within `w = rifting.margin_width_km` of the nearest
 /// sample of another fragment (great-circle distance through the plate), never below 5 km. With
 /// isostasy on, the margins then step down to the sea (a stretched, rifted margin) instead of
-/// ending in a cliff.
+/// ending in a cliff. Off by default (`rifting.margin_thinning_km` = 0): where the fragments did
+/// not part for good, the thinned strips stayed in the continent as narrow troughs.
 fn thin_rifted_margins(world: &mut World, samples: &[u32], labels: &[u8], params: &Params) {
     let (amount, width) = (
         params.rifting.margin_thinning_km,

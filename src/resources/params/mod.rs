@@ -347,7 +347,7 @@ define_params! {
         divergence_speed_mm_per_yr: f64 = 25.0, 0.0..=1000.0, "mm/yr", "Mean speed at which the fragments move away from the parent's centroid (each in proportion to its distance from it, so every fracture opens), added to the parent's own motion.";
         fracture_warp_km: f64 = 400.0, 0.0..=3000.0, "km", "Amplitude of the noise that warps the Voronoi borders between fragments into irregular fracture lines.";
         fracture_wavelength_km: f64 = 2500.0, 100.0..=40000.0, "km", "Wavelength of the fracture-warping noise.";
-        margin_thinning_km: f64 = 12.0, 0.0..=100.0, "km", "Continental crust is thinned by this much at a new rift (stretching), less away from it, so a rifted margin steps down to the sea instead of ending in a cliff; never below 5 km. Where the fragments do not part for good, the thinned strips stay in the continent as narrow troughs (docs/relief.md).";
+        margin_thinning_km: f64 = 0.0, 0.0..=100.0, "km", "Continental crust is thinned by this much at a new rift (stretching), less away from it, so a rifted margin steps down to the sea instead of ending in a cliff; never below 5 km. 0 (the default since 2026-12-06; 12 before): where the fragments did not part for good, the thinned strips stayed in the continents as narrow straight troughs held kilometres deep by the regional isostasy, with raised rims (up to 0.9% of the globe of continental crust below −2 km at 1000 My), and without them the relief is as close to Earth's (docs/relief.md).";
         margin_width_km: f64 = 200.0, 1.0..=3000.0, "km", "Width of the thinned margin on each side of a rift: the thinning falls as (1 − d/w)².";
     }
     /// Global resampling.

@@ -590,11 +590,8 @@ pub fn rift_plates(world: &mut World) {
     // The clock advances (in the Aging set) between this set and the resampling's.
     let steps = world.resource::<SimClock>().steps_since_resample + 1;
     let requested = world.resource::<ResampleRequest>().0;
-    let max_angle = world
-        .query::<&PlateFrame>()
-        .iter(world)
-        .map(|f| f.angle_rad())
-        .fold(0.0, f64::max);
+    let max_angle =
+        crate::systems::resample::max_frame_angle(world.query::<&PlateFrame>().iter(world));
     let due = crate::systems::resample::resample_due_after(
         steps,
         world.resource::<Params>(),
@@ -618,7 +615,7 @@ pub fn rift_plates_every_step(world: &mut World) {
 /// the draws are those of a rift a step.
 fn draw_rifts(world: &mut World, steps: u64) {
     let params = world.resource::<Params>();
-    if params.rifting.frequency_per_my <= 0.0 || steps == 0 {
+    if params.rifting.frequency_per_my <= 0.0 {
         return;
     }
     let seed = params.planet.seed;

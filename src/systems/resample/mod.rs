@@ -95,8 +95,13 @@ pub fn resample_due(
         clock.steps_since_resample,
         &params,
         request.0,
-        frames.iter().map(|f| f.angle_rad()).fold(0.0, f64::max),
+        max_frame_angle(frames.iter()),
     )
+}
+
+/// The largest angle any plate has turned since the last resampling (radians; 0 with no plate).
+pub fn max_frame_angle<'a>(frames: impl Iterator<Item = &'a PlateFrame>) -> f64 {
+    frames.map(|f| f.angle_rad()).fold(0.0, f64::max)
 }
 
 /// Whether a resampling is due after `steps` steps since the last one, with a resampling asked

@@ -7,7 +7,7 @@ mod common;
 
 use common::*;
 use glam::DVec3;
-use tectonic_planets::commands::{Outcome, replay};
+use tectonic_planets::commands::{Outcome, plate_at, replay};
 use tectonic_planets::geometry::{angle_between, from_lat_lon_deg};
 use tectonic_planets::prelude::*;
 use tectonic_planets::resources::Sutures;
@@ -170,6 +170,62 @@ fn a_forced_rift_along_a_line_splits_the_plate_there_and_opens_a_ridge() {
     let log = sim.world().resource::<RiftLog>();
     assert_eq!(log.events.len(), 1);
     assert_eq!(log.events[0].cause, RiftCause::Command);
+}
+
+/// A rift's fragments build no subduction front between them (so they cannot collide) for
+/// `rifting.sibling_grace_my`, even where they converge; with no grace they do at once. The
+/// fragments of a rift along the meridian are set moving towards each other at 30 mm/yr each,
+/// and the fronts are read after the rift's resampling and 10 My more.
+#[test]
+fn a_rifts_fragments_build_no_front_between_them_during_the_grace() {
+    let fronts_between_fragments = |grace: f64| {
+        let mut sim = two_plates(30_000);
+        sim.apply(&Command::SetParam {
+            key: "rifting.sibling_grace_my".into(),
+            value: tectonic_planets::commands::SettingValue::Float(grace),
+        })
+        .unwrap();
+        let Outcome::Rift { fragments } = sim.apply(&line_on_meridian_0()).unwrap() else {
+            panic!("expected a rift");
+        };
+        assert_eq!(fragments.len(), 2, "{fragments:?}");
+        // East of the line moves west, west of it moves east (poles at the north pole and the
+        // south pole): the fracture closes along its whole length.
+        let east = plate_at(&mut sim, from_lat_lon_deg(30.0, 20.0)).unwrap();
+        let west = plate_at(&mut sim, from_lat_lon_deg(30.0, -20.0)).unwrap();
+        assert_ne!(east, west);
+        for (plate, lat) in [(east, -90.0), (west, 90.0)] {
+            sim.apply(&Command::SetMotion {
+                plate: PlateRef::Id(plate),
+                pole: LatLon { lat, lon: 0.0 },
+                speed_mm_per_yr: 30.0,
+            })
+            .unwrap();
+        }
+        sim.run_for(10.0).unwrap();
+        let mut q = sim.world_mut().query::<&SubductionFront>();
+        let between = q
+            .iter(sim.world())
+            .filter(|f| {
+                let pair = [f.overriding.0, f.subducting.0];
+                pair.contains(&east) && pair.contains(&west)
+            })
+            .map(|f| f.points.len())
+            .sum::<usize>();
+        let collided = sim.world().resource::<Sutures>().total;
+        (between, collided)
+    };
+    let (with_grace, collided) = fronts_between_fragments(60.0);
+    assert_eq!(
+        with_grace, 0,
+        "front points between siblings during the grace"
+    );
+    assert_eq!(collided, 0, "siblings collided during the grace");
+    let (without, _) = fronts_between_fragments(0.0);
+    assert!(
+        without >= 10,
+        "with no grace the converging fragments should meet at a front, got {without} points"
+    );
 }
 
 #[test]

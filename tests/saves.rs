@@ -1272,6 +1272,31 @@ fn every_save_section_is_documented_and_inside_its_cap() {
     }
 }
 
+/// The rifts' fragment pairs still exempt from fronts (`rifting.siblings`) survive a save: a run
+/// with frequent rifts, saved while some pairs are exempt, loads them back as they were and
+/// resumes to the same bits as the straight run.
+#[test]
+fn rift_siblings_survive_a_save() {
+    use tectonic_planets::resources::RiftSiblings;
+    let mut p = small_params(10_000, 7);
+    p.rifting.frequency_per_my = 0.05;
+    let mut straight = Simulation::new(p).unwrap();
+    let mut steps = 0;
+    while straight.world().resource::<RiftSiblings>().pairs.is_empty() {
+        straight.step().unwrap();
+        steps += 1;
+        assert!(steps < 200, "no rift in {steps} steps");
+    }
+    straight.run_steps(2).unwrap();
+    let saved = straight.world().resource::<RiftSiblings>().clone();
+    assert!(!saved.pairs.is_empty(), "the pairs expired before the save");
+    let mut resumed = round_trip(&mut straight);
+    assert_eq!(resumed.world().resource::<RiftSiblings>(), &saved);
+    straight.run_steps(20).unwrap();
+    resumed.run_steps(20).unwrap();
+    assert_eq!(resumed.state_hash(), straight.state_hash());
+}
+
 /// With plate momentum on, a run that sutures and rifts resumes from a save to the same bits
 /// as a straight run (the exchanges depend only on the saved state).
 #[test]

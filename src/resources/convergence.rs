@@ -140,3 +140,51 @@ pub struct Sutures {
     /// consumed `applied` (for reports and tests; not saved).
     pub last_applied: Vec<Suture>,
 }
+
+/// Pairs of plates born of one rift, which build no subduction front between them (so neither
+/// goes under the other nor collides with it) until a time: a rift's fracture winds, and the
+/// rigid rotations of its fragments, which open it on the whole, close a few of its stretches
+/// (docs/relief.md). Without the exemption those stretches became fronts at once, a fragment's
+/// continent was sutured back onto its sibling within the first resampling interval (undoing
+/// the rift), and the suture's uplift drew a low ridge along the closed stretch. Where siblings
+/// overlap meanwhile, the resampling keeps one plate's crust, as anywhere plates overlap.
+/// Saved (section `rifting.siblings`).
+#[derive(Resource, Clone, Debug, Default, PartialEq)]
+pub struct RiftSiblings {
+    /// ((lower id, higher id), simulated time at which the exemption ends, My), sorted by pair,
+    /// one entry per pair.
+    pub pairs: Vec<((u32, u32), f64)>,
+}
+
+impl RiftSiblings {
+    /// Exempts every pair of `fragments` until `until_my` (a pair already there takes the new
+    /// time), and forgets the pairs whose time is over at `now_my`.
+    pub fn add(&mut self, fragments: &[u32], until_my: f64, now_my: f64) {
+        self.forget_expired(now_my);
+        for (i, &a) in fragments.iter().enumerate() {
+            for &b in &fragments[i + 1..] {
+                if a == b {
+                    continue;
+                }
+                let key = (a.min(b), a.max(b));
+                match self.pairs.binary_search_by(|(k, _)| k.cmp(&key)) {
+                    Ok(j) => self.pairs[j].1 = until_my,
+                    Err(j) => self.pairs.insert(j, (key, until_my)),
+                }
+            }
+        }
+    }
+
+    /// Whether plates `a` and `b` are siblings still exempt at `now_my`.
+    pub fn exempt(&self, a: u32, b: u32, now_my: f64) -> bool {
+        let key = (a.min(b), a.max(b));
+        self.pairs
+            .binary_search_by(|(k, _)| k.cmp(&key))
+            .is_ok_and(|j| self.pairs[j].1 > now_my)
+    }
+
+    /// Drops the pairs whose exemption is over at `now_my`.
+    pub fn forget_expired(&mut self, now_my: f64) {
+        self.pairs.retain(|&(_, until)| until > now_my);
+    }
+}

@@ -13,7 +13,7 @@ pub mod save_section;
 pub mod timings;
 
 pub use convergence::{
-    ConvergenceField, FrontPoints, OverridePairs, Suture, Sutures, TerraneField,
+    ConvergenceField, FrontPoints, OverridePairs, RiftSiblings, Suture, Sutures, TerraneField,
 };
 pub use crust::{Crust, CrustType, NO_PLATE, NonFinite, Orogeny};
 pub use params::{ParamError, ParamKind, ParamSpec, ParamValue, Params};

@@ -392,7 +392,17 @@ pub fn rift_plate(
     }
     refresh_plate_geometry(world, &ids);
     world.resource_mut::<ResampleRequest>().0 = true;
-    let step = world.resource::<SimClock>().step;
+    let (step, now_my) = {
+        let clock = world.resource::<SimClock>();
+        (clock.step, clock.time_my)
+    };
+    // The fragments build no front between them for a while (see RiftSiblings).
+    let grace = params.rifting.sibling_grace_my;
+    if grace > 0.0 {
+        world
+            .get_resource_or_init::<crate::resources::RiftSiblings>()
+            .add(&ids, now_my + grace, now_my);
+    }
     let elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
     tracing::debug!(parent, fragments = ?ids, ms = elapsed_ms, ?cause, "plate rifted");
     world

@@ -336,7 +336,9 @@ define_params! {
         graded_slope: f64 = 0.0, 0.0..=0.1, "m/m", "Graded slope of a river draining 1,000 km² (0, the default: off): where the ground falls less steeply than that to the next sample downstream (or to the sea), the river lays down what it carries until it does, so subsiding lowlands and deltas build into alluvial plains that rise gently inland. Lowland rivers fall 10⁻⁵ (the Amazon) to 10⁻³ (small rivers). Off by default: at 0.001, over seeds 1, 2, 3 and 7 at 100k samples and 250 My, the plains took 6% of the sediment and the land fraction rose by 0.01–0.03 while the −200..0 m band fell from 4.7–7.0% to 2.2–3.7% of the globe (the plains are built where shallow sea stood).";
         graded_concavity: f64 = 0.45, 0.0..=1.0, "", "How fast the graded slope falls with drainage area A: S = graded_slope·(A / 1,000 km²)^(−θ) (θ ≈ 0.45 fits 10⁻³ at 1,000 km² and 2·10⁻⁵ at the Amazon's 6 million).";
         pelagic_min_depth_m: f64 = 50.0, 0.0..=6000.0, "m", "Pelagic sediment settles only where the sea is deeper than this (the storm wave base: shallower water keeps the fine rain in suspension and carries it off). Without it, floor filled to sea level flickered across it, raised at sea by the rain and lowered on land by its age, and drew stripes of land and water along prograding coasts.";
-        pelagic_max_age_my: f64 = 300.0, 0.0..=10000.0, "My", "Pelagic sediment settles on sea floor younger than this (old floor lies below the carbonate compensation depth, where little settles), which bounds the layer to rate × age.";
+        pelagic_max_age_my: f64 = 150.0, 0.0..=10000.0, "My", "Pelagic sediment settles on sea floor younger than this (old floor lies below the carbonate compensation depth, where little settles), which bounds the layer to rate × age.";
+        pelagic_ccd_m: f64 = 0.0, 0.0..=11000.0, "m", "Carbonate compensation depth (CCD): below it the shells of the pelagic rain dissolve before they settle and only clay (`pelagic_clay_rate_m_per_my`) is laid; over the 1 km above it (the lysocline to the CCD) the rain falls linearly from `pelagic_rate_m_per_my` to the clay's. Earth: 4.2–5 km (Pacific to Atlantic). 0: off, the full rain at every depth.";
+        pelagic_clay_rate_m_per_my: f64 = 1.0, 0.0..=1000.0, "m/My", "Pelagic clay (dust, the shells' insoluble remains) laid below the carbonate compensation depth (`pelagic_ccd_m`; abyssal red clay builds at 0.5–2 m/My).";
     }
     /// Plate rifting.
     [rifting] Rifting {
@@ -346,6 +348,7 @@ define_params! {
         max_fragments: u64 = 4, 2..=4, "", "A random rift splits a plate into 2 to this many fragments (paper: n ∈ [2, 4]).";
         divergence_speed_mm_per_yr: f64 = 25.0, 0.0..=1000.0, "mm/yr", "Mean speed at which the fragments move away from the parent's centroid (each in proportion to its distance from it, so every fracture opens), added to the parent's own motion.";
         fracture_warp_km: f64 = 400.0, 0.0..=3000.0, "km", "Amplitude of the noise that warps the Voronoi borders between fragments into irregular fracture lines.";
+        sibling_grace_my: f64 = 60.0, 0.0..=10000.0, "My", "For this long after a rift, its fragments build no subduction front between them, so they neither subduct nor collide where the rotations that open their winding fracture close a stretch of it (there the resampling keeps one fragment's crust where they overlap). 0: siblings converge like any plates at once, and most rifts had a fragment's continent sutured back onto a sibling within the first resampling interval, leaving a low ridge along the closed stretch.";
         fracture_wavelength_km: f64 = 2500.0, 100.0..=40000.0, "km", "Wavelength of the fracture-warping noise.";
         margin_thinning_km: f64 = 0.0, 0.0..=100.0, "km", "Continental crust is thinned by this much at a new rift (stretching), less away from it, so a rifted margin steps down to the sea instead of ending in a cliff; never below 5 km. 0 (the default since 2026-12-06; 12 before): where the fragments did not part for good, the thinned strips stayed in the continents as narrow straight troughs held kilometres deep by the regional isostasy, with raised rims (up to 0.9% of the globe of continental crust below −2 km at 1000 My), and without them the relief is as close to Earth's (docs/relief.md).";
         margin_width_km: f64 = 200.0, 1.0..=3000.0, "km", "Width of the thinned margin on each side of a rift: the thinning falls as (1 − d/w)².";
@@ -982,7 +985,7 @@ mod tests {
     #[test]
     fn schema_is_consistent() {
         let schema = Params::schema();
-        assert_eq!(schema.len(), 111);
+        assert_eq!(schema.len(), 114);
         assert_eq!(schema.len(), BOUNDS.len());
         let mut seen = HashSet::new();
         for (spec, (lo, hi)) in schema.iter().zip(BOUNDS) {

@@ -17,7 +17,7 @@ use crate::gpu::{FieldMask, GpuContext};
 use crate::resources::convergence::NONE;
 use crate::resources::params::Params;
 use crate::resources::{
-    ConvergenceField, Crust, CrustType, FrontPoints, OverridePairs, PlateTable,
+    ConvergenceField, Crust, CrustType, FrontPoints, OverridePairs, PlateTable, RiftSiblings,
 };
 
 /// One converging boundary edge: overriding-side sample, subducting-side sample.
@@ -46,8 +46,13 @@ pub fn build_fronts(world: &mut World) {
     let r_km = params.planet.radius_km;
     let min_conv = params.subduction.min_convergence_mm_per_yr;
     let n = mesh.len();
+    let now_my = world.resource::<crate::resources::SimClock>().time_my;
+    let siblings = world
+        .get_resource::<RiftSiblings>()
+        .filter(|s| !s.pairs.is_empty());
 
-    // 1. Converging boundary edges (each undirected edge once, from its lower index).
+    // 1. Converging boundary edges (each undirected edge once, from its lower index), but
+    // between a rift's fragments still exempt from fronts ([`RiftSiblings`]).
     let edges: Vec<ConvergingEdge> = (0..n)
         .into_par_iter()
         .with_min_len(4096)
@@ -57,7 +62,7 @@ pub fn build_fronts(world: &mut World) {
             for &v in mesh.neighbors_of(u) {
                 let v = v as usize;
                 let pv = crust.plate[v];
-                if v < u || pv == pu {
+                if v < u || pv == pu || siblings.is_some_and(|s| s.exempt(pu, pv, now_my)) {
                     continue;
                 }
                 let (Some(a), Some(b)) = (table.get(pu), table.get(pv)) else {

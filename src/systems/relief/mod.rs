@@ -1210,11 +1210,7 @@ fn pelagic_rain(
     if network.drainage.ocean.len() != n || state.oceanic.len() != n || g.len() != n {
         return 0.0;
     }
-    let rain = PelagicRain {
-        layer_km: params.sediment.pelagic_rate_m_per_my * 1e-3 * params.time.time_step_my,
-        max_age_my: params.sediment.pelagic_max_age_my as f32,
-        min_depth_km: params.sediment.pelagic_min_depth_m * 1e-3,
-    };
+    let rain = PelagicRain::of(params);
     let Crust {
         thickness_km,
         elevation_km,
@@ -1233,21 +1229,55 @@ fn pelagic_rain(
 
 /// Pelagic rain (plankton shells, dust) over one step: a layer `layer_km` thick on every
 /// sample of oceanic crust at sea ([`Drainage::ocean`](drainage::Drainage::ocean)) younger than
-/// `max_age_my` (older floor lies below the carbonate compensation depth, where little settles)
-/// and deeper than `min_depth_km` (above the wave base the waves keep the fine rain in suspension
-/// and carry it off: floor filled to sea level would otherwise be raised while at sea and
-/// lowered by its age once dry, and flicker across sea level step after step).
+/// `max_age_my` and deeper than `min_depth_km` (above the wave base the waves keep the fine rain
+/// in suspension and carry it off: floor filled to sea level would otherwise be raised while at
+/// sea and lowered by its age once dry, and flicker across sea level step after step). With a
+/// carbonate compensation depth `ccd_km`, the shells dissolve in deep water: the layer falls
+/// linearly over the [`PelagicRain::LYSOCLINE_KM`] above the CCD to `clay_km`, laid below it.
+/// Floor that sinks past the CCD as it ages then keeps sinking, as on Earth, where the old
+/// abyssal plains lie at 5–6 km, instead of being held near one depth by a rain that keeps
+/// pace with its subsidence.
 #[derive(Clone, Copy, Debug)]
 pub struct PelagicRain {
-    /// Thickness laid per step, km.
+    /// Thickness laid per step above the lysocline (or everywhere without a CCD), km.
     pub layer_km: f64,
     /// Oldest floor that gets it, My.
     pub max_age_my: f32,
     /// Shallowest water that gets it, km (positive).
     pub min_depth_km: f64,
+    /// Carbonate compensation depth, km (positive; 0: none, the full layer at every depth).
+    pub ccd_km: f64,
+    /// Thickness laid per step below the CCD, km.
+    pub clay_km: f64,
 }
 
 impl PelagicRain {
+    /// Depth range over which the shells dissolve, from the lysocline down to the CCD, km.
+    pub const LYSOCLINE_KM: f64 = 1.0;
+
+    /// The rain of one step under `params` (`sediment.pelagic_*`).
+    pub fn of(params: &Params) -> Self {
+        let s = &params.sediment;
+        let dt = params.time.time_step_my;
+        Self {
+            layer_km: s.pelagic_rate_m_per_my * 1e-3 * dt,
+            max_age_my: s.pelagic_max_age_my as f32,
+            min_depth_km: s.pelagic_min_depth_m * 1e-3,
+            ccd_km: s.pelagic_ccd_m * 1e-3,
+            clay_km: s.pelagic_clay_rate_m_per_my * 1e-3 * dt,
+        }
+    }
+
+    /// The layer laid in one step on floor `depth_km` below sea level (positive), km.
+    #[inline]
+    pub fn layer_at(&self, depth_km: f64) -> f64 {
+        if !(self.ccd_km > 0.0) {
+            return self.layer_km;
+        }
+        let f = ((self.ccd_km - depth_km) / Self::LYSOCLINE_KM).clamp(0.0, 1.0);
+        self.clay_km + (self.layer_km - self.clay_km) * f
+    }
+
     /// Adds the layer to `thickness_km` where it settles (see [`PelagicRain`]) and returns its
     /// volume, km³. One pass: each fixed chunk adds its rain and sums its volume, the chunks are
     /// summed in order (the same sum whatever the thread count).
@@ -1260,7 +1290,7 @@ impl PelagicRain {
         ocean: &[bool],
         area_km2: &[f64],
     ) -> f64 {
-        if !(self.layer_km > 0.0) {
+        if !(self.layer_km > 0.0 || (self.ccd_km > 0.0 && self.clay_km > 0.0)) {
             return 0.0;
         }
         let top = -self.min_depth_km;
@@ -1279,8 +1309,9 @@ impl PelagicRain {
                 for (k, t) in ts.iter_mut().enumerate() {
                     let i = c * CH + k;
                     if settles(i) {
-                        *t += self.layer_km as f32;
-                        sum += self.layer_km * area_km2.get(i).copied().unwrap_or(0.0);
+                        let layer = self.layer_at(-f64::from(elevation_km[i]));
+                        *t += layer as f32;
+                        sum += layer * area_km2.get(i).copied().unwrap_or(0.0);
                     }
                 }
                 sum
@@ -1984,6 +2015,8 @@ mod tests {
             layer_km: 0.028,
             max_age_my: 300.0,
             min_depth_km: 0.05,
+            ccd_km: 0.0,
+            clay_km: 0.0,
         };
         // deep and young; shallow (20 m); old; continental crust; a lake (not the sea); deep again
         let elevation = [-4.0f32, -0.02, -5.0, -0.5, -0.3, -0.051];
@@ -1997,6 +2030,48 @@ mod tests {
         assert_eq!(got, [true, false, false, false, false, true]);
         assert!((v - 2.0 * 0.028 * 100.0).abs() < 1e-9, "volume {v}");
         assert!((thickness[0] - 7.028).abs() < 1e-6);
+    }
+
+    /// Below the carbonate compensation depth only clay settles; over the kilometre above it the
+    /// rain falls linearly from the full layer to the clay's; above the lysocline it is the
+    /// full layer; and its volume is what was laid. Seen to fail with the ramp's sign reversed
+    /// (the deep floor got the full layer).
+    #[test]
+    fn pelagic_rain_dissolves_below_the_lysocline() {
+        let rain = PelagicRain {
+            layer_km: 0.028,
+            max_age_my: 300.0,
+            min_depth_km: 0.05,
+            ccd_km: 4.5,
+            clay_km: 0.002,
+        };
+        // above the lysocline (3.5 km), halfway to the CCD, at the CCD, below it
+        let elevation = [-3.0f32, -4.0, -4.5, -6.0];
+        let n = elevation.len();
+        let (age, oceanic, ocean, area) = (
+            vec![50.0f32; n],
+            vec![true; n],
+            vec![true; n],
+            vec![10.0; n],
+        );
+        let mut thickness = vec![7.0f32; n];
+        let v = rain.lay(&mut thickness, &elevation, &age, &oceanic, &ocean, &area);
+        let laid: Vec<f64> = thickness.iter().map(|&t| f64::from(t) - 7.0).collect();
+        let want = [0.028, 0.015, 0.002, 0.002];
+        for (k, (&got, &w)) in laid.iter().zip(&want).enumerate() {
+            assert!(
+                (got - w).abs() < 2e-6,
+                "sample {k}: laid {got} km, want {w}"
+            );
+        }
+        let total: f64 = want.iter().map(|w| w * 10.0).sum();
+        assert!((v - total).abs() < 1e-9, "volume {v}, want {total}");
+        // Without a CCD, the full layer everywhere.
+        let flat = PelagicRain {
+            ccd_km: 0.0,
+            ..rain
+        };
+        assert_eq!(flat.layer_at(6.0), 0.028);
     }
 
     /// Plate 0 (the overriding plate) holds the northern hemisphere, plate 1 the rest: floor

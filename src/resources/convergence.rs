@@ -163,9 +163,6 @@ impl RiftSiblings {
         self.forget_expired(now_my);
         for (i, &a) in fragments.iter().enumerate() {
             for &b in &fragments[i + 1..] {
-                if a == b {
-                    continue;
-                }
                 let key = (a.min(b), a.max(b));
                 match self.pairs.binary_search_by(|(k, _)| k.cmp(&key)) {
                     Ok(j) => self.pairs[j].1 = until_my,

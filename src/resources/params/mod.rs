@@ -291,7 +291,7 @@ define_params! {
     }
     /// Rivers: the drainage network, stream-power incision and hillslope diffusion.
     [rivers] Rivers {
-        erodibility_per_my: f64 = 2.0, 0.0..=1000.0, "km^(1−2m)/My", "Erodibility K of stream power E = K·A^m·S^n − E_c (A in km² weighted by the rain, S in m/m, E in km/My). For m = 0.5, K = 1 is 1e−6/yr in SI (typical 1e−7…1e−5: Stock & Montgomery 1999). Calibrated with the climate on and endorheic basins filling from their floor (docs/relief.md); 2.4 until 2026-12-06, when rifts that hold left fewer sutures and less ground above 3 km (a lower K raises the ranges without more rock reaching the sea in the long run, which more uplift would).";
+        erodibility_per_my: f64 = 1.8, 0.0..=1000.0, "km^(1−2m)/My", "Erodibility K of stream power E = K·A^m·S^n − E_c (A in km² weighted by the rain, S in m/m, E in km/My). For m = 0.5, K = 1 is 1e−6/yr in SI (typical 1e−7…1e−5: Stock & Montgomery 1999). Calibrated with the climate on and endorheic basins filling from their floor (docs/relief.md); 2.4 until 2026-12-06, when rifts that hold left fewer sutures and less ground above 3 km (a lower K raises the ranges without more rock reaching the sea in the long run, which more uplift would).";
         area_exponent: f64 = 0.5, 0.0..=2.0, "", "Exponent m of drainage area (m/n ≈ 0.5: Whipple & Tucker 1999).";
         slope_exponent: f64 = 1.0, 0.25..=4.0, "", "Exponent n of slope.";
         incision_threshold_mm_per_yr: f64 = 0.3, 0.0..=100.0, "mm/yr", "Incision threshold E_c: old ranges stop eroding once their stream power falls under it, so they persist (Baldwin, Whipple & Tucker 2003; Tucker & Bras 2000).";

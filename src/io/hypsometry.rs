@@ -118,9 +118,15 @@ pub const AGE_DEPTH_MAX_AGE_MY: f32 = 80.0;
 /// Load (km of crust or sediment over the normal oceanic thickness) above which oceanic crust is
 /// an arc, a plateau or a sediment fan rather than normal floor, for
 /// [`Hypsometry::ocean_age_depth_r_normal_floor`]: the pelagic cover the parameters lay on floor
-/// [`AGE_DEPTH_MAX_AGE_MY`] old (1.1 km at the default 14 m/My), plus 0.5 km.
+/// [`AGE_DEPTH_MAX_AGE_MY`] old at most (1.1 km at the default 14 m/My; with a carbonate
+/// compensation depth, the faster of the shells' and the clay's rates), plus 0.5 km.
 pub fn normal_floor_max_load_km(params: &crate::resources::Params) -> f64 {
-    params.sediment.pelagic_rate_m_per_my.max(0.0) * 1e-3 * AGE_DEPTH_MAX_AGE_MY as f64 + 0.5
+    let s = &params.sediment;
+    let mut rate = s.pelagic_rate_m_per_my.max(0.0);
+    if s.pelagic_ccd_m > 0.0 {
+        rate = rate.max(s.pelagic_clay_rate_m_per_my);
+    }
+    rate * 1e-3 * AGE_DEPTH_MAX_AGE_MY as f64 + 0.5
 }
 
 /// Area-weighted Pearson correlation of depth (−elevation) with √age over the oceanic samples of

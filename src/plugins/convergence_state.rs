@@ -319,6 +319,7 @@ fn load_convergence(world: &mut World, r: &mut SectionReader, v: u32) -> Result<
         relative_velocity: rel,
         converged_km,
         convergence_km_per_my,
+        near_vertex: Vec::new(),
     });
     world.insert_resource(field);
     world.insert_resource(OverridePairs(pairs));

@@ -40,6 +40,12 @@ pub struct FrontPoints {
     pub converged_km: Vec<f32>,
     /// Convergence rate at the last step, km/My (dynamic).
     pub convergence_km_per_my: Vec<f32>,
+    /// Where a walk to the mesh vertex nearest the point, in the subducting plate's frame,
+    /// starts (dynamic; not saved): the dominant corner of the triangle the last tracking found
+    /// under it there, so the walk from it ends at once while the plates have not moved since
+    /// ([`crate::geometry::SphereMesh::nearest_vertex_from`]). A hint only: the walk finds the
+    /// nearest vertex from any start; empty or [`NONE`] where there is none.
+    pub near_vertex: Vec<u32>,
 }
 
 impl FrontPoints {

@@ -203,6 +203,7 @@ pub fn build_fronts(world: &mut World) {
     fp.relative_velocity = vec![DVec3::ZERO; m];
     fp.converged_km = vec![0.0; m];
     fp.convergence_km_per_my = vec![0.0; m];
+    fp.near_vertex = vec![NONE; m];
     pairs.sort_unstable();
     pairs.dedup();
 
@@ -339,7 +340,7 @@ fn track_fronts_over(dt: f32, t: FrontTracking) {
     let probe_rad = mesh.mean_spacing_rad();
     // Where each front point is: the triangle and weights under it in the subducting plate
     // (f64, on the CPU), whether subducting crust is there, the velocities.
-    type Located = ((bool, bool), [u32; 3], [f64; 3], DVec3, f32);
+    type Located = ((bool, bool), [u32; 3], [f64; 3], DVec3, f32, u32);
     let located: Vec<Option<Located>> = (0..fp.len())
         .into_par_iter()
         .with_min_len(256)
@@ -382,6 +383,7 @@ fn track_fronts_over(dt: f32, t: FrontTracking) {
                 [loc.weights[0], loc.weights[1], loc.weights[2]],
                 over.plate_from_world * rel_world,
                 conv,
+                t[loc.dominant_corner()],
             ))
         })
         .collect();
@@ -391,7 +393,7 @@ fn track_fronts_over(dt: f32, t: FrontTracking) {
     let index: Vec<u32> = located
         .iter()
         .flatten()
-        .flat_map(|&(_, t, _, _, _)| t)
+        .flat_map(|&(_, t, _, _, _, _)| t)
         .collect();
     let mut gathered = None;
     if let Some(mut gpu) = gpu
@@ -408,19 +410,21 @@ fn track_fronts_over(dt: f32, t: FrontTracking) {
     let gathered = gathered
         .unwrap_or_else(|| crate::gpu::crust_gather::crust_gather_cpu(&crust.elevation_km, &index));
     let mut next = 0;
-    let results: Vec<((bool, bool), f32, DVec3, f32)> = located
+    let results: Vec<((bool, bool), f32, DVec3, f32, u32)> = located
         .into_iter()
         .map(|l| {
-            let Some((active, _, weights, rel, conv)) = l else {
-                return ((false, false), 0.0, DVec3::ZERO, 0.0);
+            let Some((active, _, weights, rel, conv, near)) = l else {
+                return ((false, false), 0.0, DVec3::ZERO, 0.0, NONE);
             };
             let zv = &gathered[next..next + 3];
             next += 3;
             let z = (0..3).map(|i| weights[i] * zv[i] as f64).sum::<f64>() as f32;
-            (active, z, rel, conv)
+            (active, z, rel, conv, near)
         })
         .collect();
-    for (k, ((active, trench), z, rel, conv)) in results.into_iter().enumerate() {
+    fp.near_vertex.resize(fp.len(), NONE);
+    for (k, ((active, trench), z, rel, conv, near)) in results.into_iter().enumerate() {
+        fp.near_vertex[k] = near;
         fp.active[k] = active;
         fp.trench[k] = trench;
         fp.subducting_elevation_km[k] = z;

@@ -115,31 +115,32 @@ fn prepare(
     delta_km[n..].iter_mut().for_each(|d| *d = 0.0);
     let substeps = ((dt_my * max_rate / 0.5).ceil() as u32).clamp(1, 10_000);
     let dts = dt_my / substeps as f64;
+    // The sea samples with a land neighbour, ascending, each once: gathered from the land
+    // (about a third of the samples) rather than tested at every sea sample.
     scratch.coast.clear();
-    if g.is_symmetric() {
-        // The sea samples with a land neighbour: in index order, each once.
-        scratch.coast.par_extend(
-            (0..n as u32)
-                .into_par_iter()
-                .with_min_len(8192)
-                .filter(|&j| {
-                    ocean[j as usize]
-                        && g.neighbors_of(j as usize)
+    const CH: usize = 16384;
+    let parts: Vec<Vec<u32>> = ocean[..n]
+        .par_chunks(CH)
+        .enumerate()
+        .map(|(c, o)| {
+            let mut part = Vec::new();
+            for (k, &sea) in o.iter().enumerate() {
+                if !sea {
+                    part.extend(
+                        g.neighbors_of(c * CH + k)
                             .iter()
-                            .any(|&i| !ocean[i as usize])
-                }),
-        );
-    } else {
-        for i in (0..n).filter(|&i| !ocean[i]) {
-            for &j in g.neighbors_of(i) {
-                if ocean[j as usize] {
-                    scratch.coast.push(j);
+                            .filter(|&&j| ocean[j as usize]),
+                    );
                 }
             }
-        }
-        scratch.coast.sort_unstable();
-        scratch.coast.dedup();
+            part
+        })
+        .collect();
+    for part in &parts {
+        scratch.coast.extend_from_slice(part);
     }
+    scratch.coast.par_sort_unstable();
+    scratch.coast.dedup();
     Some((substeps, dts))
 }
 

@@ -1436,7 +1436,13 @@ fn trench_candidates(
     let place = |&(sub, sample, k): &(u32, u32, u32)| {
         let (s, o) = (table.get(sub)?, table.get(fp.overriding[k as usize])?);
         let p = s.plate_from_world * (o.world_from_plate * pos[sample as usize]);
-        Some((p, mesh.nearest_vertex(p)))
+        // The tracking located the same point this step: walking from there is the locator's
+        // search without the search (the same vertex; a stale hint only walks further).
+        let v = match fp.near_vertex.get(k as usize) {
+            Some(&h) if (h as usize) < n => mesh.nearest_vertex_from(h, p),
+            _ => mesh.nearest_vertex(p),
+        };
+        Some((p, v))
     };
     // (Serial without rayon at all: off the pool, a parallel loop would run on another pool.)
     if serial {

@@ -49,7 +49,7 @@ use crate::geometry::spherical::{angle_between, tangent_basis, triple};
 use crate::random::{SimRng, hash3, stream, vector_fbm};
 use crate::resources::params::Params;
 use crate::resources::{Crust, CrustType, NextPlateId, ResampleRequest, SimClock};
-use crate::systems::resample::plate_geometry;
+use crate::systems::resample::plate_geometry_of;
 
 /// Why a plate could not be rifted.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -521,7 +521,7 @@ pub fn refresh_plate_geometry(world: &mut World, ids: &[u32]) {
     let mut geometry = {
         let mesh = world.resource::<SphereMesh>();
         let crust = world.resource::<Crust>();
-        plate_geometry(mesh, crust)
+        plate_geometry_of(mesh, crust, Some(ids))
     };
     let targets: Vec<(Entity, u32)> = world
         .query::<(Entity, &Plate)>()

@@ -174,6 +174,17 @@ pub struct PlateGeometry {
 /// Computes each plate's samples, triangles, bounding cap and areas from a crust on the
 /// reference mesh. Indexed by plate id (plates without samples get `None`).
 pub fn plate_geometry(mesh: &SphereMesh, crust: &Crust) -> Vec<Option<PlateGeometry>> {
+    plate_geometry_of(mesh, crust, None)
+}
+
+/// [`plate_geometry`] of the plates in `ids` only (all with `None`; the others get `None`):
+/// each plate's geometry is the same as among all, since it reads only its own samples and
+/// triangles. A collision's detachment or a rift touches two or three plates.
+pub fn plate_geometry_of(
+    mesh: &SphereMesh,
+    crust: &Crust,
+    ids: Option<&[u32]>,
+) -> Vec<Option<PlateGeometry>> {
     let max_id = crust
         .plate
         .iter()
@@ -181,10 +192,16 @@ pub fn plate_geometry(mesh: &SphereMesh, crust: &Crust) -> Vec<Option<PlateGeome
         .filter(|&p| p != NO_PLATE)
         .max()
         .map_or(0, |m| m as usize + 1);
+    let mut wanted = vec![ids.is_none(); max_id];
+    for &id in ids.unwrap_or(&[]) {
+        if let Some(w) = wanted.get_mut(id as usize) {
+            *w = true;
+        }
+    }
     // Samples per plate first, so that each plate's lists are allocated once.
     let mut count = vec![0usize; max_id];
     for &p in &crust.plate {
-        if p != NO_PLATE {
+        if p != NO_PLATE && wanted[p as usize] {
             count[p as usize] += 1;
         }
     }
@@ -204,7 +221,7 @@ pub fn plate_geometry(mesh: &SphereMesh, crust: &Crust) -> Vec<Option<PlateGeome
                     crust.plate[tri[2] as usize],
                 ];
                 for k2 in 0..3 {
-                    if o[k2] == NO_PLATE || o[..k2].contains(&o[k2]) {
+                    if o[k2] == NO_PLATE || o[..k2].contains(&o[k2]) || !wanted[o[k2] as usize] {
                         continue;
                     }
                     lists[o[k2] as usize].push((b * BLOCK + k) as u32);

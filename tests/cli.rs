@@ -843,3 +843,57 @@ fn the_adapter_survey_runs_in_a_child_process() {
     assert!(err.contains("surveyed in a child process"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `planet bench --per-step`: a row for each timed step, numbered in order, whose sets' times
+/// add up to no more than the step's own wall time (the sets run one after the other inside
+/// it), with the relief's sets among the columns.
+#[test]
+fn bench_per_step_rows_add_up_within_each_step() {
+    let out = planet()
+        .args([
+            "bench",
+            "--samples",
+            "4000",
+            "--plates",
+            "8",
+            "--steps",
+            "6",
+            "--resamplings",
+            "0",
+            "--backend",
+            "cpu",
+            "--per-step",
+        ])
+        .output()
+        .expect("run planet bench");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "bench failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut lines = stdout
+        .lines()
+        .skip_while(|l| !l.starts_with("per step, ms"));
+    assert!(lines.next().is_some(), "no per-step table in:\n{stdout}");
+    let header: Vec<&str> = lines.next().expect("header").split_whitespace().collect();
+    for set in ["step", "kind", "drainage", "sediment", "isostasy"] {
+        assert!(header.contains(&set), "no {set:?} column: {header:?}");
+    }
+    let rows: Vec<&str> = lines
+        .take_while(|l| l.trim_start().starts_with(|c: char| c.is_ascii_digit()))
+        .collect();
+    assert_eq!(rows.len(), 6, "{stdout}");
+    for (k, row) in rows.iter().enumerate() {
+        // "k steady step 12.3 0.1 ...": the number, two words of kind, the step, the sets.
+        let f: Vec<&str> = row.split_whitespace().collect();
+        assert_eq!(f[0], k.to_string(), "{row}");
+        let step: f64 = f[3].parse().expect("step ms");
+        let sets: f64 = f[4..].iter().filter_map(|v| v.parse::<f64>().ok()).sum();
+        assert_eq!(f.len() - 4, header.len() - 3, "{row} / {header:?}");
+        assert!(
+            sets > 0.0 && sets <= step * 1.02 + 0.05 * (f.len() - 4) as f64,
+            "step {k}: sets {sets} ms within a step of {step} ms? {row}"
+        );
+    }
+}

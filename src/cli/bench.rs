@@ -35,6 +35,11 @@ pub(crate) struct BenchArgs {
     /// `--resamplings` are not used), with the paper's figures beside ours.
     #[arg(long)]
     pub(crate) table2: bool,
+    /// Also print a row for each timed step: its wall time, its kind, and the time of each
+    /// system set in it (ms), to see where the steps with and without a drainage network, and
+    /// those around a resampling, spend theirs.
+    #[arg(long)]
+    pub(crate) per_step: bool,
     /// With `--table2`: divide the sample counts by this (a quick look; the tests use it).
     #[arg(long, default_value_t = 1, hide = true)]
     pub(crate) table2_divisor: u64,
@@ -170,6 +175,18 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
         TectonicSystems::Isostasy,
     ];
     let mut relief_from: Vec<usize> = Vec::new();
+    // With `--per-step`: each step's time in each set and in the resampling, None where it did
+    // not run.
+    let per_step_names: Vec<&str> = if a.per_step {
+        TectonicSystems::ALL
+            .iter()
+            .map(|s| s.name())
+            .chain(["resampling", "after_resample"])
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let mut per_step: Vec<Vec<Option<f64>>> = Vec::new();
     for k in 0..a.steps {
         if k == 1 {
             relief_from = relief_sets
@@ -178,9 +195,26 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
                 .collect();
         }
         let before = (sim.clock().resamplings, gpu_traffic(&sim));
+        let counts: Vec<u64> = per_step_names
+            .iter()
+            .map(|name| sim.timings().recorded(name))
+            .collect();
         let s = Instant::now();
         sim.step()?;
         let ms = s.elapsed().as_secs_f64() * 1e3;
+        if a.per_step {
+            per_step.push(
+                per_step_names
+                    .iter()
+                    .zip(&counts)
+                    .map(|(name, &c)| {
+                        let t = sim.timings();
+                        (t.recorded(name) > c)
+                            .then(|| t.last(name).map_or(0.0, |d| d.as_secs_f64() * 1e3))
+                    })
+                    .collect(),
+            );
+        }
         let after = gpu_traffic(&sim);
         steps.push(BenchStep {
             ms,
@@ -210,6 +244,9 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
         sim.step()?;
     }
     let rift_ms = bench_rifts(&mut sim, 3)?;
+    if a.per_step {
+        print_per_step(&per_step_names, &per_step, &steps);
+    }
     println!("median per step, by system set:");
     let mut per_step_sum = 0.0;
     for set in TectonicSystems::ALL {
@@ -387,6 +424,32 @@ pub(crate) fn bench(a: BenchArgs) -> Result<()> {
         );
     }
     bench_saves(&mut sim)
+}
+
+/// The table of `--per-step`: a row a step (its number, kind and wall time, then each set's
+/// time, `-` where it did not run), with the columns of the sets that took at least 0.05 ms in
+/// some step.
+fn print_per_step(names: &[&str], rows: &[Vec<Option<f64>>], steps: &[BenchStep]) {
+    let shown: Vec<usize> = (0..names.len())
+        .filter(|&c| rows.iter().any(|r| r[c].is_some_and(|ms| ms >= 0.05)))
+        .collect();
+    println!("per step, ms (the sets in the order they run; `-`: did not run):");
+    let mut header = format!("  {:>4} {:<16} {:>8}", "step", "kind", "step");
+    for &c in &shown {
+        header += &format!(" {:>w$}", names[c], w = names[c].len().max(6));
+    }
+    println!("{header}");
+    for (k, (row, step)) in rows.iter().zip(steps).enumerate() {
+        let mut line = format!("  {k:>4} {:<16} {:>8.1}", step.kind.label(), step.ms);
+        for &c in &shown {
+            let w = names[c].len().max(6);
+            match row[c] {
+                Some(ms) => line += &format!(" {ms:>w$.1}"),
+                None => line += &format!(" {:>w$}", "-"),
+            }
+        }
+        println!("{line}");
+    }
 }
 
 /// One timed step of the bench.

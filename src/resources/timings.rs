@@ -13,6 +13,9 @@ const HISTORY: usize = 4096;
 #[derive(Resource, Clone, Debug, Default)]
 pub struct StepTimings {
     per_set: BTreeMap<&'static str, Vec<Duration>>,
+    /// How many durations were ever recorded under each name (the history keeps the last
+    /// [`HISTORY`] only).
+    recorded: BTreeMap<&'static str, u64>,
     /// When the set being timed started.
     pub(crate) started: Option<std::time::Instant>,
 }
@@ -20,6 +23,7 @@ pub struct StepTimings {
 impl StepTimings {
     /// Records one duration under `name`.
     pub fn record(&mut self, name: &'static str, d: Duration) {
+        *self.recorded.entry(name).or_default() += 1;
         let v = self.per_set.entry(name).or_default();
         if v.len() == HISTORY {
             v.remove(0);
@@ -37,6 +41,11 @@ impl StepTimings {
     /// The most recent duration recorded under `name`.
     pub fn last(&self, name: &str) -> Option<Duration> {
         self.per_set.get(name).and_then(|v| v.last().copied())
+    }
+    /// How many durations were ever recorded under `name` (0 if none): a name recorded during
+    /// a step has a larger count after it.
+    pub fn recorded(&self, name: &str) -> u64 {
+        self.recorded.get(name).copied().unwrap_or(0)
     }
     /// Median of the recorded durations under `name`, milliseconds.
     pub fn median_ms(&self, name: &str) -> Option<f64> {

@@ -410,7 +410,10 @@ fn track_fronts_over(dt: f32, t: FrontTracking) {
     let gathered = gathered
         .unwrap_or_else(|| crate::gpu::crust_gather::crust_gather_cpu(&crust.elevation_km, &index));
     let mut next = 0;
-    let results: Vec<((bool, bool), f32, DVec3, f32, u32)> = located
+    // (Active and trench, the elevation under the point, the relative velocity, the
+    // convergence rate, the nearest-vertex hint.)
+    type Tracked = ((bool, bool), f32, DVec3, f32, u32);
+    let results: Vec<Tracked> = located
         .into_iter()
         .map(|l| {
             let Some((active, _, weights, rel, conv, near)) = l else {

@@ -105,6 +105,16 @@ pub fn wind(p: DVec3) -> DVec3 {
 }
 
 impl ClimateScratch {
+    /// Frees the search's work areas, keeping the mesh's tables (`zonal`, `along`, which
+    /// depend on the graph and positions alone).
+    pub fn release_search(&mut self) {
+        let (zonal, along) = (
+            std::mem::take(&mut self.zonal),
+            std::mem::take(&mut self.along),
+        );
+        *self = Self::default();
+        (self.zonal, self.along) = (zonal, along);
+    }
     /// The per-mesh tables of `g` (see the fields).
     fn prepare_mesh(&mut self, g: &ReliefGraph, positions: &[DVec3], n: usize) {
         if self.zonal.len() == n && self.along.len() == g.neighbors.len() {
@@ -464,5 +474,39 @@ mod tests {
         assert!(one.iter().any(|&b| f32::from_bits(b) != 1.0));
         assert_eq!(one, run(2));
         assert_eq!(one, run(3));
+    }
+
+    /// A scratch whose search was released (the mesh's tables kept, as through a resampling)
+    /// gives a new surface the rain a fresh scratch gives it.
+    #[test]
+    fn the_rain_after_a_released_search_is_a_fresh_scratchs() {
+        let mesh = SphereMesh::fibonacci(20_000, 0.5, 7, 6371.0).expect("mesh");
+        let g = graph(&mesh);
+        let surface = |k: f64| -> Vec<f32> {
+            mesh.positions
+                .iter()
+                .map(|p| (2.0 * (k * p.x).sin() * (3.0 * p.y).cos() + 0.3 * p.z) as f32)
+                .collect()
+        };
+        let rain = |z: &[f32], s: &mut ClimateScratch| {
+            let mut out = Vec::new();
+            precipitation(
+                &g,
+                &mesh.positions,
+                z,
+                &ClimateParams::default(),
+                &mut out,
+                s,
+            );
+            out.iter().map(|v| v.to_bits()).collect::<Vec<u32>>()
+        };
+        let mut kept = ClimateScratch::default();
+        rain(&surface(4.0), &mut kept);
+        kept.release_search();
+        assert_eq!(kept.along.len(), g.neighbors.len(), "the tables went");
+        let other = surface(7.0);
+        let fresh = rain(&other, &mut ClimateScratch::default());
+        assert!(fresh.iter().any(|&b| f32::from_bits(b) != 1.0));
+        assert_eq!(rain(&other, &mut kept), fresh);
     }
 }

@@ -618,11 +618,20 @@ pub struct ClimateState {
 }
 
 impl ClimateState {
-    /// Frees the search's work area (rebuilt at its next run); none may be running (one runs
-    /// only within a step).
+    /// Frees the search's work area and the mesh's tables (rebuilt at the next run); none may
+    /// be running (one runs only within a step).
     pub fn release_scratch(&mut self) {
         if self.pending.is_none() {
             self.scratch = climate::ClimateScratch::default();
+        }
+    }
+
+    /// Frees the search's work area but keeps the mesh's tables (about 11 bytes a sample, which
+    /// depend on the mesh alone and took 15–20 ms to build again at 500k samples after every
+    /// resampling; keeping them through the resampling left the peak of memory where it was).
+    pub fn release_search(&mut self) {
+        if self.pending.is_none() {
+            self.scratch.release_search();
         }
     }
 }
@@ -801,7 +810,8 @@ pub fn forget_network(mut network: ResMut<DrainageNetwork>, mut flux: ResMut<Sur
 /// resampling makes stale: [`forget_network`]) and the relief passes' work areas are freed, and
 /// built again on the next step. So the resampling's own buffers do not come on top of them, in
 /// the step that holds the run's peak memory. What is freed never changes a result (a save holds
-/// none of it, and resumes to the same bits).
+/// none of it, and resumes to the same bits). The climate keeps its mesh tables, which the
+/// resampling does not change.
 pub fn release_relief_before_resample(
     mut state: ResMut<ReliefState>,
     mut network: ResMut<DrainageNetwork>,
@@ -809,7 +819,7 @@ pub fn release_relief_before_resample(
 ) {
     state.release_scratch();
     if let Some(mut c) = climate {
-        c.release_scratch();
+        c.release_search();
     }
     network.forget();
     network.release_buffers();

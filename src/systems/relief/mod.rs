@@ -1399,15 +1399,82 @@ fn subducted_passages(
 struct TrenchScratch {
     /// Per sample: the front point whose neighbourhood it is in (`NONE` if none).
     point: Vec<u32>,
-    /// Per mesh vertex: the search that last reached it.
-    stamp: Vec<u32>,
-    search: u32,
+    /// The searches' marks and queues, one per worker thread (the first for a serial run).
+    searches: Vec<Mutex<PlateSearch>>,
     /// The converging points: (subducting plate, sample, point), sorted.
     order: Vec<(u32, u32, u32)>,
     /// Per entry of `order`: the point in its subducting plate's frame and the vertex nearest
     /// it there (`None` when a plate is gone).
     seeds: Vec<Option<(glam::DVec3, u32)>>,
+    /// The subducting plates' runs of `order`, and what each plate's search marked.
+    plates: Vec<(usize, usize)>,
+    marked: Vec<Vec<(u32, u32)>>,
+}
+
+/// The work area of one plate's search in [`trench_candidates`].
+#[derive(Default)]
+struct PlateSearch {
+    /// Per mesh vertex: the search that last reached it.
+    stamp: Vec<u32>,
+    search: u32,
+    /// (vertex, the index in `order` of the point whose search reached it).
     queue: Vec<(u32, u32)>,
+}
+
+impl PlateSearch {
+    /// The breadth-first search of one subducting plate `sub` from its points
+    /// `order[from..to]` (see [`trench_candidates`]): calls `mark(j, k)` for each sample `j` of
+    /// the plate it reaches, in the order reached, with the point `k` whose search got there
+    /// first. It reads and writes only its own marks, so plates can be searched side by side.
+    #[allow(clippy::too_many_arguments)]
+    fn run(
+        &mut self,
+        mesh: &SphereMesh,
+        plate: &[u32],
+        order: &[(u32, u32, u32)],
+        seeds: &[Option<(glam::DVec3, u32)>],
+        (from, to): (usize, usize),
+        cos_r: f64,
+        mut mark: impl FnMut(u32, u32),
+    ) {
+        let n = mesh.len();
+        let sub = order[from].0;
+        self.stamp.resize(n, 0);
+        self.search = self.search.wrapping_add(1);
+        if self.search == 0 {
+            self.stamp.fill(0);
+            self.search = 1;
+        }
+        let now = self.search;
+        let pos = &mesh.positions;
+        self.queue.clear();
+        for (idx, seed) in seeds.iter().enumerate().take(to).skip(from) {
+            if let Some((_, v)) = *seed
+                && self.stamp[v as usize] != now
+            {
+                self.stamp[v as usize] = now;
+                self.queue.push((v, idx as u32));
+            }
+        }
+        let mut head = 0;
+        while head < self.queue.len() {
+            let (j, src) = self.queue[head];
+            head += 1;
+            // Only points with a seed are queued.
+            let Some((c, _)) = seeds[src as usize] else {
+                continue;
+            };
+            if plate[j as usize] == sub {
+                mark(j, order[src as usize].2);
+            }
+            for &nb in mesh.neighbors_of(j as usize) {
+                if self.stamp[nb as usize] != now && pos[nb as usize].dot(c) >= cos_r {
+                    self.stamp[nb as usize] = now;
+                    self.queue.push((nb, src));
+                }
+            }
+        }
+    }
 }
 
 /// Marks the samples that may lie in a trench: those of a subducting plate within `radius`
@@ -1415,8 +1482,9 @@ struct TrenchScratch {
 /// `min_speed` (km/My), all positions taken in the subducting plate's frame as it stands now.
 /// Breadth first over the mesh from every such point of one plate at once (the points by plate,
 /// then by sample); a sample keeps the point whose search reached it first (`scratch.point`).
-/// The points are placed in parallel (one after the other with `serial`), the searches run
-/// serially in that fixed order, so the marks are the same whatever the thread count.
+/// The points are placed in parallel, and the plates searched side by side, each on marks of
+/// its own thread (one after the other with `serial`): a plate's search marks only its own
+/// samples, in its own fixed order, so the marks are the same whatever the thread count.
 #[allow(clippy::too_many_arguments)]
 fn trench_candidates(
     mesh: &SphereMesh,
@@ -1432,7 +1500,6 @@ fn trench_candidates(
     let sc = scratch;
     sc.point.clear();
     sc.point.resize(n, NONE);
-    sc.stamp.resize(n, 0);
     sc.order.clear();
     sc.order.extend((0..fp.len()).filter_map(|k| {
         let fast = f64::from(fp.convergence_km_per_my.get(k).copied().unwrap_or(0.0)) > min_speed;
@@ -1465,46 +1532,54 @@ fn trench_candidates(
             .collect_into_vec(&mut sc.seeds);
     }
     let cos_r = radius.cos();
+    sc.plates.clear();
     let mut from = 0;
     while from < sc.order.len() {
         let sub = sc.order[from].0;
         let to = from + sc.order[from..].partition_point(|&(p, _, _)| p == sub);
-        sc.search = sc.search.wrapping_add(1);
-        if sc.search == 0 {
-            sc.stamp.fill(0);
-            sc.search = 1;
-        }
-        let now = sc.search;
-        // The queue holds (vertex, the index in `order` of the point whose search reached it).
-        sc.queue.clear();
-        for idx in from..to {
-            if let Some((_, v)) = sc.seeds[idx]
-                && sc.stamp[v as usize] != now
-            {
-                sc.stamp[v as usize] = now;
-                sc.queue.push((v, idx as u32));
-            }
-        }
-        let mut head = 0;
-        while head < sc.queue.len() {
-            let (j, src) = sc.queue[head];
-            head += 1;
-            // Only points with a seed are queued.
-            let Some((c, _)) = sc.seeds[src as usize] else {
-                continue;
-            };
-            let k = sc.order[src as usize].2;
-            if plate[j as usize] == sub && sc.point[j as usize] == NONE {
-                sc.point[j as usize] = k;
-            }
-            for &nb in mesh.neighbors_of(j as usize) {
-                if sc.stamp[nb as usize] != now && pos[nb as usize].dot(c) >= cos_r {
-                    sc.stamp[nb as usize] = now;
-                    sc.queue.push((nb, src));
-                }
-            }
-        }
+        sc.plates.push((from, to));
         from = to;
+    }
+    let threads = if serial {
+        1
+    } else {
+        rayon::current_num_threads().max(1)
+    };
+    if sc.searches.len() < threads {
+        sc.searches.resize_with(threads, Default::default);
+    }
+    let (order, seeds, point) = (&sc.order, &sc.seeds, &mut sc.point);
+    if threads == 1 {
+        let search = sc.searches[0].get_mut().unwrap_or_else(|e| e.into_inner());
+        for &run in &sc.plates {
+            search.run(mesh, plate, order, seeds, run, cos_r, |j, k| {
+                point[j as usize] = k;
+            });
+        }
+        return;
+    }
+    // The plates with the most points first, each a task of its own, on the marks of the
+    // thread that takes it.
+    sc.plates
+        .sort_by_key(|&(a, b)| (std::cmp::Reverse(b - a), a));
+    let searches = &sc.searches;
+    sc.plates
+        .par_iter()
+        .with_max_len(1)
+        .map(|&run| {
+            let at = rayon::current_thread_index().unwrap_or(0) % searches.len();
+            let mut search = searches[at].lock().unwrap_or_else(|e| e.into_inner());
+            let mut marked = Vec::new();
+            search.run(mesh, plate, order, seeds, run, cos_r, |j, k| {
+                marked.push((j, k));
+            });
+            marked
+        })
+        .collect_into_vec(&mut sc.marked);
+    for marked in &sc.marked {
+        for &(j, k) in marked {
+            point[j as usize] = k;
+        }
     }
 }
 
@@ -2088,6 +2163,67 @@ mod tests {
             ..rain
         };
         assert_eq!(flat.layer_at(6.0), 0.028);
+    }
+
+    /// The trench of a planet with several subducting plates is the same bits computed on one
+    /// thread (as on the trench's own thread) and with the plates searched side by side on two
+    /// or three. Seen to fail when a plate's search marked samples of another plate.
+    #[test]
+    fn the_trench_is_the_same_searched_plate_by_plate_in_parallel() {
+        use crate::components::{Plate, PlateBounds, PlateFrame, PlateMotion, PlateStats};
+        let mut p = Params::default();
+        p.planet.samples = 20_000;
+        p.planet.seed = 3;
+        let mut sim = crate::simulation::Simulation::new(p.clone()).expect("simulation");
+        for _ in 0..6 {
+            sim.step().expect("step");
+        }
+        let world = sim.world_mut();
+        let table = PlateTable::from_plates(
+            world
+                .query::<(&Plate, &PlateMotion, &PlateFrame, &PlateBounds, &PlateStats)>()
+                .iter(world)
+                .map(|(p, m, f, b, s)| (*p, *m, *f, *b, *s)),
+        );
+        let (mesh, fp, crust) = (
+            world.resource::<SphereMesh>(),
+            world.resource::<FrontPoints>(),
+            world.resource::<Crust>(),
+        );
+        let c = TrenchConsts::of(&p);
+        let subducting: std::collections::BTreeSet<u32> = (0..fp.len())
+            .filter(|&k| f64::from(fp.convergence_km_per_my[k]) > c.min_speed)
+            .map(|k| fp.subducting[k])
+            .collect();
+        assert!(subducting.len() >= 3, "subducting plates: {subducting:?}");
+        let run = |threads: usize, serial: bool| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .expect("pool");
+            pool.install(|| {
+                let mut out = Vec::new();
+                trench_depths(
+                    mesh,
+                    &table,
+                    fp,
+                    &crust.plate,
+                    &crust.crust_type,
+                    c,
+                    serial,
+                    &mut TrenchScratch::default(),
+                    &mut out,
+                );
+                out.iter().map(|d| d.to_bits()).collect::<Vec<u32>>()
+            })
+        };
+        let one = run(1, true);
+        assert!(
+            one.iter().filter(|&&b| f32::from_bits(b) > 0.0).count() > 50,
+            "some trench"
+        );
+        assert_eq!(one, run(2, false));
+        assert_eq!(one, run(3, false));
     }
 
     /// Plate 0 (the overriding plate) holds the northern hemisphere, plate 1 the rest: floor

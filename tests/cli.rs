@@ -8,6 +8,19 @@ fn planet() -> Command {
     Command::new(env!("CARGO_BIN_EXE_planet"))
 }
 
+/// Runs `planet` with `args`, checks that it exits 0 (else fails with its stderr), and returns
+/// its stdout.
+fn planet_ok(args: &[&str]) -> String {
+    let out = planet().args(args).output().expect("run planet");
+    assert!(
+        out.status.success(),
+        "planet {} failed: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
 fn temp_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("planet-cli-{}-{}", name, std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
@@ -574,25 +587,16 @@ fn bench_from_a_save_times_the_saved_planet() {
 /// `--table2-divisor`). Seen to fail with the subduction row's two sets left out of the total.
 #[test]
 fn bench_table2_prints_the_papers_layout_with_ours_beside_it() {
-    let out = planet()
-        .args([
-            "bench",
-            "--table2",
-            "--table2-divisor",
-            "50",
-            "--plates",
-            "8",
-            "--backend",
-            "cpu",
-        ])
-        .output()
-        .expect("run planet bench --table2");
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "bench --table2 failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = planet_ok(&[
+        "bench",
+        "--table2",
+        "--table2-divisor",
+        "50",
+        "--plates",
+        "8",
+        "--backend",
+        "cpu",
+    ]);
     // Our four figures on the left of '|', the paper's on the right.
     let row = |label: &str| -> (Vec<f64>, Vec<String>) {
         let line = text
@@ -849,29 +853,20 @@ fn the_adapter_survey_runs_in_a_child_process() {
 /// it), with the relief's sets among the columns.
 #[test]
 fn bench_per_step_rows_add_up_within_each_step() {
-    let out = planet()
-        .args([
-            "bench",
-            "--samples",
-            "4000",
-            "--plates",
-            "8",
-            "--steps",
-            "6",
-            "--resamplings",
-            "0",
-            "--backend",
-            "cpu",
-            "--per-step",
-        ])
-        .output()
-        .expect("run planet bench");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "bench failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = planet_ok(&[
+        "bench",
+        "--samples",
+        "4000",
+        "--plates",
+        "8",
+        "--steps",
+        "6",
+        "--resamplings",
+        "0",
+        "--backend",
+        "cpu",
+        "--per-step",
+    ]);
     let mut lines = stdout
         .lines()
         .skip_while(|l| !l.starts_with("per step, ms"));

@@ -115,11 +115,17 @@ pub fn propagate_nearest_grouped(
         groups[k].1.push((s, l));
     }
     // The members of each group with seeds, in sample order, and each sample's place there.
+    // (Groups are plate ids: a table by id rather than a hash lookup per sample.)
     const NO_SLOT: u32 = u32::MAX;
+    let max_group = groups.iter().map(|g| g.0 as usize).max().map_or(0, |m| m + 1);
+    let mut slot_by_group = vec![NO_SLOT; max_group];
+    for (k, g) in groups.iter().enumerate() {
+        slot_by_group[g.0 as usize] = k as u32;
+    }
     let slot: Vec<u32> = group_of_sample[..n]
         .par_iter()
         .with_min_len(8192)
-        .map(|g| slot_of_group.get(g).map_or(NO_SLOT, |&k| k as u32))
+        .map(|&g| slot_by_group.get(g as usize).copied().unwrap_or(NO_SLOT))
         .collect();
     let mut members: Vec<Vec<u32>> = vec![Vec::new(); groups.len()];
     let mut local = vec![0u32; n];

@@ -117,7 +117,11 @@ pub fn propagate_nearest_grouped(
     // The members of each group with seeds, in sample order, and each sample's place there.
     // (Groups are plate ids: a table by id rather than a hash lookup per sample.)
     const NO_SLOT: u32 = u32::MAX;
-    let max_group = groups.iter().map(|g| g.0 as usize).max().map_or(0, |m| m + 1);
+    let max_group = groups
+        .iter()
+        .map(|g| g.0 as usize)
+        .max()
+        .map_or(0, |m| m + 1);
     let mut slot_by_group = vec![NO_SLOT; max_group];
     for (k, g) in groups.iter().enumerate() {
         slot_by_group[g.0 as usize] = k as u32;

@@ -8,6 +8,9 @@ fn planet() -> Command {
     Command::new(env!("CARGO_BIN_EXE_planet"))
 }
 
+/// `planet bench` on a small planet (4,000 samples, 8 plates); the steps and the rest follow.
+const SMALL_BENCH: [&str; 5] = ["bench", "--samples", "4000", "--plates", "8"];
+
 /// Runs `planet` with `args`, checks that it exits 0 (else fails with its stderr), and returns
 /// its stdout.
 fn planet_ok(args: &[&str]) -> String {
@@ -409,19 +412,8 @@ fn plugins_are_listed_switched_and_configured() {
 fn bench_times_steady_and_resampling_steps_apart() {
     let run = |backend: &str| {
         planet()
-            .args([
-                "bench",
-                "--samples",
-                "4000",
-                "--plates",
-                "8",
-                "--steps",
-                "24",
-                "--resamplings",
-                "1",
-                "--backend",
-                backend,
-            ])
+            .args(SMALL_BENCH)
+            .args(["--steps", "24", "--resamplings", "1", "--backend", backend])
             .env(
                 "XDG_RUNTIME_DIR",
                 std::env::temp_dir().join(format!("planet-cli-xdg-{}", std::process::id())),
@@ -853,12 +845,7 @@ fn the_adapter_survey_runs_in_a_child_process() {
 /// it), with the relief's sets among the columns.
 #[test]
 fn bench_per_step_rows_add_up_within_each_step() {
-    let stdout = planet_ok(&[
-        "bench",
-        "--samples",
-        "4000",
-        "--plates",
-        "8",
+    let args = [
         "--steps",
         "6",
         "--resamplings",
@@ -866,7 +853,8 @@ fn bench_per_step_rows_add_up_within_each_step() {
         "--backend",
         "cpu",
         "--per-step",
-    ]);
+    ];
+    let stdout = planet_ok(&[&SMALL_BENCH[..], &args].concat());
     let mut lines = stdout
         .lines()
         .skip_while(|l| !l.starts_with("per step, ms"));

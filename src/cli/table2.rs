@@ -180,7 +180,7 @@ pub(crate) fn table2(a: &BenchArgs) -> Result<()> {
     };
     row(
         "whole planet, 250 My (s)",
-        std::array::from_fn(|k| format!("{:.1}", cols[k].whole_s)),
+        std::array::from_fn(|k| format!("{:.2}", cols[k].whole_s)),
         std::array::from_fn(|k| {
             format!("{:.0}-{:.0}", paper_whole(k, 120.0), paper_whole(k, 20.0))
         }),

@@ -137,33 +137,107 @@ fn prepare(
 
 /// The end of one call: writes the new elevation `new_of(i)` of every land sample (not in
 /// `ocean`) whose elevation was finite, its change to `delta_km` (0 elsewhere), and the volumes
-/// lowered and raised to `budget` (summed in index order).
+/// lowered and raised to `budget` (summed by fixed chunks of samples, the chunks in order: the
+/// same sums whatever the thread count).
 fn apply_land_change(
     g: &ReliefGraph,
     elevation_km: &mut [f32],
     delta_km: &mut [f32],
     ocean: &[bool],
-    new_of: impl Fn(usize) -> f32,
+    new_of: impl Fn(usize) -> f32 + Sync,
     budget: &mut DiffusionBudget,
 ) {
     let n = g.len();
-    for i in 0..n {
-        delta_km[i] = 0.0;
-        let old = elevation_km[i];
-        if ocean[i] || !old.is_finite() {
-            continue;
-        }
-        let new = new_of(i);
-        elevation_km[i] = new;
-        let d = new - old;
-        delta_km[i] = d;
-        let v = d as f64 * g.area_km2[i];
-        if v < 0.0 {
-            budget.lowered_km3 -= v;
-        } else {
-            budget.raised_km3 += v;
-        }
+    const CH: usize = 8192;
+    let sums: Vec<(f64, f64)> = elevation_km[..n]
+        .par_chunks_mut(CH)
+        .zip(delta_km[..n].par_chunks_mut(CH))
+        .enumerate()
+        .map(|(c, (zs, ds))| {
+            let (mut lowered, mut raised) = (0.0, 0.0);
+            for (k, (z, dz)) in zs.iter_mut().zip(ds.iter_mut()).enumerate() {
+                let i = c * CH + k;
+                *dz = 0.0;
+                let old = *z;
+                if ocean[i] || !old.is_finite() {
+                    continue;
+                }
+                let new = new_of(i);
+                *z = new;
+                let d = new - old;
+                *dz = d;
+                let v = d as f64 * g.area_km2[i];
+                if v < 0.0 {
+                    lowered -= v;
+                } else {
+                    raised += v;
+                }
+            }
+            (lowered, raised)
+        })
+        .collect();
+    for (lowered, raised) in sums {
+        budget.lowered_km3 += lowered;
+        budget.raised_km3 += raised;
     }
+}
+
+/// One explicit sub-step of the land's diffusion from the heights `h_of(i)` (read at land
+/// samples only): the new heights of the land into `next` (the sea's entries untouched), and
+/// the coastal outflow of the sub-step (`kappa` km²/My over `dts` My) added to `receipts` (one entry per `coast` sample).
+#[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
+fn diffusion_substep(
+    g: &ReliefGraph,
+    ocean: &[bool],
+    h_of: impl Fn(usize) -> f64 + Sync,
+    kappa: f64,
+    dts: f64,
+    next: &mut [f64],
+    coast: &[u32],
+    receipts: &mut [f64],
+) {
+    const CH: usize = 8192;
+    next.par_chunks_mut(CH).enumerate().for_each(|(c, out)| {
+        let base = c * CH;
+        for k in 0..out.len() {
+            let i = base + k;
+            if ocean[i] {
+                continue;
+            }
+            let hi = h_of(i);
+            if g.area_km2[i] <= 0.0 {
+                out[k] = hi;
+                continue;
+            }
+            let mut flux = 0.0; // km³/My into i
+            for e in g.edges(i) {
+                let j = g.neighbors[e] as usize;
+                let w = g.edge_weight[e] as f64;
+                flux += if !ocean[j] {
+                    w * (h_of(j) - hi)
+                } else {
+                    -w * hi.max(0.0)
+                };
+            }
+            out[k] = hi + dts * kappa * flux / g.area_km2[i];
+        }
+    });
+    // Coastal outflow received by each ocean sample (gather: deterministic).
+    receipts
+        .par_iter_mut()
+        .zip(coast.par_iter())
+        .with_min_len(1024)
+        .for_each(|(acc, &j)| {
+            let j = j as usize;
+            let mut v = 0.0;
+            for e in g.edges(j) {
+                let i = g.neighbors[e] as usize;
+                if !ocean[i] {
+                    v += g.edge_weight[e] as f64 * h_of(i).max(0.0);
+                }
+            }
+            *acc += kappa * v * dts;
+        });
 }
 
 /// Diffuses land elevations over `dt_my` with diffusivity `kappa_km2_per_my`. Land samples are
@@ -195,69 +269,52 @@ pub fn diffuse_land(
         return DiffusionBudget::default();
     };
     let kappa = kappa_km2_per_my;
-    scratch.h.resize(n, 0.0);
     scratch.next.resize(n, 0.0);
-    // Only the land's heights are read (the sea's entries keep whatever they held).
-    const CH: usize = 8192;
-    scratch.h.par_chunks_mut(CH).enumerate().for_each(|(c, h)| {
-        for (k, h) in h.iter_mut().enumerate() {
-            let i = c * CH + k;
-            if !ocean[i] {
-                let z = elevation_km[i] as f64;
-                *h = if z.is_finite() { z } else { 0.0 };
-            }
-        }
-    });
     scratch.receipts.clear();
     scratch.receipts.resize(scratch.coast.len(), 0.0);
-    for _ in 0..substeps {
-        let h = &scratch.h;
-        scratch
-            .next
-            .par_chunks_mut(CH)
-            .enumerate()
-            .for_each(|(c, out)| {
-                let base = c * CH;
-                for k in 0..out.len() {
-                    let i = base + k;
-                    if ocean[i] {
-                        continue;
-                    }
-                    let hi = h[i];
-                    if g.area_km2[i] <= 0.0 {
-                        out[k] = hi;
-                        continue;
-                    }
-                    let mut flux = 0.0; // km³/My into i
-                    for e in g.edges(i) {
-                        let j = g.neighbors[e] as usize;
-                        let w = g.edge_weight[e] as f64;
-                        flux += if !ocean[j] {
-                            w * (h[j] - hi)
-                        } else {
-                            -w * hi.max(0.0)
-                        };
-                    }
-                    out[k] = hi + dts * kappa * flux / g.area_km2[i];
+    // The land's heights, as read by the sub-steps: a non-finite elevation reads as 0.
+    let z_of = |i: usize| {
+        let z = elevation_km[i] as f64;
+        if z.is_finite() { z } else { 0.0 }
+    };
+    if substeps == 1 {
+        // One sub-step (the usual case): straight from the elevation, without a copy.
+        diffusion_substep(
+            g,
+            ocean,
+            z_of,
+            kappa,
+            dts,
+            &mut scratch.next,
+            &scratch.coast,
+            &mut scratch.receipts,
+        );
+    } else {
+        // Only the land's heights are read (the sea's entries keep whatever they held).
+        const CH: usize = 8192;
+        scratch.h.resize(n, 0.0);
+        scratch.h.par_chunks_mut(CH).enumerate().for_each(|(c, h)| {
+            for (k, h) in h.iter_mut().enumerate() {
+                let i = c * CH + k;
+                if !ocean[i] {
+                    *h = z_of(i);
                 }
-            });
-        // Coastal outflow received by each ocean sample (gather: deterministic).
-        scratch
-            .receipts
-            .par_iter_mut()
-            .zip(scratch.coast.par_iter())
-            .with_min_len(1024)
-            .for_each(|(acc, &j)| {
-                let j = j as usize;
-                let mut v = 0.0;
-                for e in g.edges(j) {
-                    let i = g.neighbors[e] as usize;
-                    if !ocean[i] {
-                        v += g.edge_weight[e] as f64 * h[i].max(0.0);
-                    }
-                }
-                *acc += kappa * v * dts;
-            });
+            }
+        });
+        for _ in 0..substeps {
+            let h = &scratch.h;
+            diffusion_substep(
+                g,
+                ocean,
+                |i| h[i],
+                kappa,
+                dts,
+                &mut scratch.next,
+                &scratch.coast,
+                &mut scratch.receipts,
+            );
+            std::mem::swap(&mut scratch.h, &mut scratch.next);
+        }
         std::mem::swap(&mut scratch.h, &mut scratch.next);
     }
     let mut budget = DiffusionBudget {
@@ -268,13 +325,13 @@ pub fn diffuse_land(
         to_ocean_km3[j as usize] += scratch.receipts[k];
         budget.to_ocean_km3 += scratch.receipts[k];
     }
-    let h = &scratch.h;
+    let new = &scratch.next;
     apply_land_change(
         g,
         elevation_km,
         delta_km,
         ocean,
-        |i| h[i] as f32,
+        |i| new[i] as f32,
         &mut budget,
     );
     budget

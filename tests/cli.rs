@@ -574,9 +574,10 @@ fn bench_from_a_save_times_the_saved_planet() {
 }
 
 /// `planet bench --table2` prints the paper's Table 2 layout: every row, our four columns beside
-/// the paper's, our total at least the sum of the rows it contains, and a whole-planet time that
-/// is positive at each of four growing resolutions. Run on planets 50 times smaller than the table's (the hidden
-/// `--table2-divisor`). Seen to fail with the subduction row's two sets left out of the total.
+/// the paper's, our total at least the sum of the rows it contains, and a whole-planet time at
+/// each of four growing resolutions. Run on planets 50 times smaller than the table's (the
+/// hidden `--table2-divisor`). Seen to fail with the subduction row's two sets left out of the
+/// total.
 #[test]
 fn bench_table2_prints_the_papers_layout_with_ours_beside_it() {
     let text = planet_ok(&[
@@ -598,7 +599,12 @@ fn bench_table2_prints_the_papers_layout_with_ours_beside_it() {
         let (ours, paper) = line[label.len()..].split_once('|').expect("two halves");
         let ours: Vec<f64> = ours
             .split_whitespace()
-            .map(|x| x.parse().unwrap_or_else(|_| panic!("{label}: {x:?}")))
+            .map(|x| {
+                // Sample counts read "1.2k": thousands.
+                x.trim_end_matches('k')
+                    .parse()
+                    .unwrap_or_else(|_| panic!("{label}: {x:?}"))
+            })
             .collect();
         (ours, paper.split_whitespace().map(str::to_string).collect())
     };
@@ -645,16 +651,7 @@ fn bench_table2_prints_the_papers_layout_with_ours_beside_it() {
         whole.iter().all(|&x| x.is_finite() && x > 0.0),
         "whole planet times {whole:?}"
     );
-    let points: Vec<f64> = text
-        .lines()
-        .find(|l| l.starts_with("sample points"))
-        .expect("a sample points row")["sample points".len()..]
-        .split_once('|')
-        .expect("two halves")
-        .0
-        .split_whitespace()
-        .map(|x| x.trim_end_matches('k').parse::<f64>().expect("a count"))
-        .collect();
+    let (points, _) = row("sample points");
     assert!(
         points.windows(2).all(|w| w[1] > w[0]),
         "sample points {points:?}"

@@ -184,7 +184,8 @@ fn apply_land_change(
 
 /// One explicit sub-step of the land's diffusion from the heights `h_of(i)` (read at land
 /// samples only): the new heights of the land into `next` (the sea's entries untouched), and
-/// the coastal outflow of the sub-step (`kappa` km²/My over `dts` My) added to `receipts` (one entry per `coast` sample).
+/// the coastal outflow of the sub-step (`kappa` km²/My over `dts` My) added to `receipts` (one
+/// entry per `coast` sample).
 #[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
 fn diffusion_substep(
     g: &ReliefGraph,
@@ -315,6 +316,7 @@ pub fn diffuse_land(
             );
             std::mem::swap(&mut scratch.h, &mut scratch.next);
         }
+        // The last sub-step's heights back in `next`, where the one-step path leaves them.
         std::mem::swap(&mut scratch.h, &mut scratch.next);
     }
     let mut budget = DiffusionBudget {

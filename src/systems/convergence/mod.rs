@@ -196,33 +196,49 @@ fn propagate_core(
     // Ordered by chord length (monotone in the great-circle angle, and much cheaper). While the
     // search runs, `dist` holds the best chord offered so far (a worse offer is not queued)
     // and `label` its front point; chords become angles at the end.
-    let chord = |a: DVec3, b: DVec3| (a - b).length();
     let max_chord = 2.0 * (0.5 * max_rad.min(std::f64::consts::PI)).sin();
+    // A squared chord above this is surely past `max_chord` once its root is taken (the bound
+    // leaves room for the rounding of both), so the root is not taken.
+    let far_sq = max_chord * max_chord * (1.0 + 1e-9);
     let width = 0.5 * mesh.mean_spacing_rad();
     let mut buckets: Vec<Vec<(u32, u32, f32)>> = Vec::new();
+    // Emptied buckets, their room kept for the buckets further out.
+    let mut spare: Vec<Vec<(u32, u32, f32)>> = Vec::new();
+    // Offers chord `c` from label `l` to `node` (at index `a`).
     let offer = |buckets: &mut Vec<Vec<(u32, u32, f32)>>,
+                 spare: &mut Vec<Vec<(u32, u32, f32)>>,
                  dist: &mut [f32],
                  lab: &mut [u32],
                  cur: usize,
                  c: f64,
                  node: u32,
+                 a: usize,
                  l: u32| {
-        let a = at(node as usize);
         if c > max_chord || (c as f32) >= dist[a] {
             return;
         }
         dist[a] = c as f32;
         lab[a] = l;
         let b = ((c / width) as usize).max(cur);
-        if b >= buckets.len() {
-            buckets.resize_with(b + 1, Vec::new);
+        while b >= buckets.len() {
+            buckets.push(spare.pop().unwrap_or_default());
         }
         buckets[b].push((node, l, c as f32));
     };
     for &(s, l) in seeds {
         if allowed(s as usize, l) {
-            let c = chord(mesh.positions[s as usize], origin(l));
-            offer(&mut buckets, dist, label, 0, c, s, l);
+            let c = (mesh.positions[s as usize] - origin(l)).length();
+            offer(
+                &mut buckets,
+                &mut spare,
+                dist,
+                label,
+                0,
+                c,
+                s,
+                at(s as usize),
+                l,
+            );
         }
     }
     let mut cur = 0;
@@ -240,14 +256,34 @@ fn propagate_core(
             let o = origin(l);
             for &h in mesh.neighbors_of(n) {
                 let h = h as usize;
-                if !allowed(h, l) || settled[at(h)] {
+                if !allowed(h, l) {
                     continue;
                 }
-                let c = chord(mesh.positions[h], o);
-                offer(&mut buckets, dist, label, cur, c, h as u32, l);
+                let ah = at(h);
+                if settled[ah] {
+                    continue;
+                }
+                let d = mesh.positions[h] - o;
+                let sq = d.length_squared();
+                if sq > far_sq {
+                    continue;
+                }
+                offer(
+                    &mut buckets,
+                    &mut spare,
+                    dist,
+                    label,
+                    cur,
+                    sq.sqrt(),
+                    h as u32,
+                    ah,
+                    l,
+                );
             }
         }
-        buckets[cur] = Vec::new();
+        let mut done = std::mem::take(&mut buckets[cur]);
+        done.clear();
+        spare.push(done);
         cur += 1;
     }
 }

@@ -192,9 +192,7 @@ fn bad_parameters_give_clear_errors() {
 
 #[test]
 fn params_prints_a_config_that_loads_back() {
-    let out = planet().arg("params").output().unwrap();
-    assert!(out.status.success());
-    let text = String::from_utf8(out.stdout).unwrap();
+    let text = planet_ok(&["params"]);
     assert!(
         text.contains("radius_km = 6370.0") && text.contains("# "),
         "{text}"
@@ -203,12 +201,10 @@ fn params_prints_a_config_that_loads_back() {
     std::fs::create_dir_all(&dir).unwrap();
     let f = dir.join("defaults.toml");
     std::fs::write(&f, &text).unwrap();
-    let again = planet()
-        .args(["params", "--config", f.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(again.status.success());
-    assert_eq!(String::from_utf8(again.stdout).unwrap(), text);
+    assert_eq!(
+        planet_ok(&["params", "--config", f.to_str().unwrap()]),
+        text
+    );
 }
 
 #[test]
@@ -313,8 +309,7 @@ fn output_path_that_is_a_file_is_refused() {
 
 #[test]
 fn plugins_are_listed_switched_and_configured() {
-    let out = planet().arg("plugins").output().expect("run planet");
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = planet_ok(&["plugins"]);
     let line = text
         .lines()
         .find(|l| l.starts_with("hotspots "))
@@ -333,8 +328,7 @@ fn plugins_are_listed_switched_and_configured() {
             "{name}: {text}"
         );
     }
-    let out = planet().arg("params").output().expect("run planet");
-    let params = String::from_utf8_lossy(&out.stdout);
+    let params = planet_ok(&["params"]);
     assert!(params.contains("[plugins.hotspots]\n"), "{params}");
     assert!(params.contains("\nradius_km = 150.0\n"), "{params}");
 
@@ -498,17 +492,16 @@ fn bench_from_a_save_times_the_saved_planet() {
     let dir = temp_dir("bench-from");
     std::fs::create_dir_all(&dir).unwrap();
     let save = save_small_planet(&dir, "b.planet", "30", &[]);
-    let out = planet()
-        .args(["bench", "--steps", "3", "--resamplings", "0", "--from"])
-        .arg(&save)
-        .output()
-        .expect("run planet bench");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "bench --from failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let save_s = save.to_str().expect("a UTF-8 path");
+    let stdout = planet_ok(&[
+        "bench",
+        "--steps",
+        "3",
+        "--resamplings",
+        "0",
+        "--from",
+        save_s,
+    ]);
     assert!(stdout.contains("planet bench: 4000 samples"), "{stdout}");
     let loaded = stdout
         .lines()
@@ -528,26 +521,17 @@ fn bench_from_a_save_times_the_saved_planet() {
         "{stdout}"
     );
     // `--relief-every` applies to the loaded planet.
-    let out = planet()
-        .args([
-            "bench",
-            "--steps",
-            "3",
-            "--resamplings",
-            "0",
-            "--relief-every",
-            "1",
-        ])
-        .arg("--from")
-        .arg(&save)
-        .output()
-        .expect("run planet bench");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = planet_ok(&[
+        "bench",
+        "--steps",
+        "3",
+        "--resamplings",
+        "0",
+        "--relief-every",
+        "1",
+        "--from",
+        save_s,
+    ]);
     assert!(
         stdout.contains("a drainage network every 1 steps"),
         "{stdout}"

@@ -91,6 +91,10 @@ fn join_block(
             if j >= i || j < base || !member(j) {
                 continue;
             }
+            // Most neighbours of a sample inside a set hang straight from the root `i` joined.
+            if parent[j - base] as usize == ri {
+                continue;
+            }
             let rj = find_lowest(parent, base, j - base) + base;
             if rj < ri {
                 parent[ri - base] = rj as u32;

@@ -25,7 +25,8 @@ use tectonic_planets::simulation::Simulation;
 use tectonic_planets::systems::convergence::fronts::build_fronts;
 use tectonic_planets::systems::convergence::propagate_nearest_grouped;
 use tectonic_planets::systems::resample::{
-    GapSample, OverlapRules, interpolate, nearest_two_plates, resample_locate_cpu,
+    GapSample, OverlapRules, gaps_from_nearest, interpolate, nearest_two_plates,
+    resample_locate_cpu,
 };
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -92,45 +93,29 @@ fn box_dist2(b: &Aabb, q: Vec3A) -> f32 {
     d.length_squared()
 }
 
-/// Nearest origin to `q` among a tree's labels, within squared chord `max2`: (label, chord²).
-/// `hint`: a label of the tree whose distance bounds the search from the start (the previous
-/// sample's answer: samples are stored along a space-filling curve, so it is usually close).
-/// `stack`: reused between queries.
-fn nearest(
+/// The nearest-first walk of both queries: from the root, the nearer child first, a box pruned
+/// when it lies farther from `q` than `bound(state)` (a squared chord); `leaf(state, primitive)`
+/// sees each primitive of the leaves reached. `stack` is reused between queries.
+fn walk<S>(
     bvh: &Bvh2,
-    labels: &[u32],
-    origin: &[DVec3],
     q: DVec3,
-    max2: f64,
-    hint: Option<u32>,
     stack: &mut Vec<u32>,
-) -> Option<(u32, f64)> {
+    state: &mut S,
+    bound: impl Fn(&S) -> f64,
+    mut leaf: impl FnMut(&mut S, u32),
+) {
     let qf = Vec3A::new(q.x as f32, q.y as f32, q.z as f32);
-    let mut best: Option<(u32, f64)> = None;
-    let mut best2 = max2;
-    if let Some(h) = hint {
-        let c2 = (origin[h as usize] - q).length_squared();
-        if c2 <= best2 {
-            best = Some((h, c2));
-            best2 = c2;
-        }
-    }
     stack.clear();
     stack.push(0);
     while let Some(ni) = stack.pop() {
         let node = &bvh.nodes[ni as usize];
         // f32 boxes: a margin well above their rounding.
-        if box_dist2(node.aabb(), qf) as f64 > best2 * (1.0 + 1e-4) + 1e-9 {
+        if box_dist2(node.aabb(), qf) as f64 > bound(state) * (1.0 + 1e-4) + 1e-9 {
             continue;
         }
         if node.is_leaf() {
             for k in node.first_index..node.first_index + node.prim_count {
-                let l = labels[bvh.primitive_indices[k as usize] as usize];
-                let c2 = (origin[l as usize] - q).length_squared();
-                if c2 <= best2 && best.is_none_or(|(bl, b2)| c2 < b2 || (c2 == b2 && l < bl)) {
-                    best = Some((l, c2));
-                    best2 = c2;
-                }
+                leaf(state, bvh.primitive_indices[k as usize]);
             }
         } else {
             let (a, b) = (node.first_index, node.first_index + 1);
@@ -146,7 +131,44 @@ fn nearest(
             }
         }
     }
-    best
+}
+
+/// Nearest origin to `q` among a tree's labels, within squared chord `max2`: (label, chord²).
+/// `hint`: a label of the tree whose distance bounds the search from the start (the previous
+/// sample's answer: samples are stored along a space-filling curve, so it is usually close).
+/// `stack`: reused between queries.
+fn nearest(
+    bvh: &Bvh2,
+    labels: &[u32],
+    origin: &[DVec3],
+    q: DVec3,
+    max2: f64,
+    hint: Option<u32>,
+    stack: &mut Vec<u32>,
+) -> Option<(u32, f64)> {
+    // The best so far (label, chord²), and the bound: its chord², or the limit's.
+    let mut best: (Option<(u32, f64)>, f64) = (None, max2);
+    if let Some(h) = hint {
+        let c2 = (origin[h as usize] - q).length_squared();
+        if c2 <= max2 {
+            best = (Some((h, c2)), c2);
+        }
+    }
+    walk(
+        bvh,
+        q,
+        stack,
+        &mut best,
+        |b| b.1,
+        |b, prim| {
+            let l = labels[prim as usize];
+            let c2 = (origin[l as usize] - q).length_squared();
+            if c2 <= b.1 && b.0.is_none_or(|(bl, b2)| c2 < b2 || (c2 == b2 && l < bl)) {
+                *b = (Some((l, c2)), c2);
+            }
+        },
+    );
+    best.0
 }
 
 fn bvh_field(
@@ -366,49 +388,27 @@ fn two_nearest(
     q: DVec3,
     stack: &mut Vec<u32>,
 ) -> [Option<(u32, u32, f64)>; 2] {
-    let qf = Vec3A::new(q.x as f32, q.y as f32, q.z as f32);
     let mut best: [Option<(u32, u32, f64)>; 2] = [None, None];
+    // Only a seed nearer than the second can change either.
     let bound = |b: &[Option<(u32, u32, f64)>; 2]| b[1].map_or(f64::INFINITY, |x| x.2);
-    stack.clear();
-    stack.push(0);
-    while let Some(ni) = stack.pop() {
-        let node = &bvh.nodes[ni as usize];
-        let b2 = bound(&best);
-        if box_dist2(node.aabb(), qf) as f64 > b2 * (1.0 + 1e-4) + 1e-9 {
-            continue;
-        }
-        if node.is_leaf() {
-            for k in node.first_index..node.first_index + node.prim_count {
-                let (s, p) = seeds[bvh.primitive_indices[k as usize] as usize];
-                let c2 = (positions[s as usize] - q).length_squared();
-                let better = |x: Option<(u32, u32, f64)>| {
-                    x.is_none_or(|(xs, _, x2)| c2 < x2 || (c2 == x2 && s < xs))
-                };
-                if best[0].is_some_and(|a| a.1 == p) {
-                    // The nearest plate's own seed: it can only be nearer.
-                    if better(best[0]) {
-                        best[0] = Some((s, p, c2));
-                    }
-                } else if better(best[0]) {
-                    best[1] = best[0];
-                    best[0] = Some((s, p, c2));
-                } else if better(best[1]) {
-                    best[1] = Some((s, p, c2));
-                }
+    walk(bvh, q, stack, &mut best, bound, |best, prim| {
+        let (s, p) = seeds[prim as usize];
+        let c2 = (positions[s as usize] - q).length_squared();
+        let better = |x: Option<(u32, u32, f64)>| {
+            x.is_none_or(|(xs, _, x2)| c2 < x2 || (c2 == x2 && s < xs))
+        };
+        if best[0].is_some_and(|a| a.1 == p) {
+            // The nearest plate's own seed: it can only be nearer.
+            if better(best[0]) {
+                best[0] = Some((s, p, c2));
             }
-        } else {
-            let (a, b) = (node.first_index, node.first_index + 1);
-            let da = box_dist2(bvh.nodes[a as usize].aabb(), qf);
-            let db = box_dist2(bvh.nodes[b as usize].aabb(), qf);
-            if da <= db {
-                stack.push(b);
-                stack.push(a);
-            } else {
-                stack.push(a);
-                stack.push(b);
-            }
+        } else if better(best[0]) {
+            best[1] = best[0];
+            best[0] = Some((s, p, c2));
+        } else if better(best[1]) {
+            best[1] = Some((s, p, c2));
         }
-    }
+    });
     best
 }
 
@@ -428,11 +428,10 @@ fn gaps(sim: &mut Simulation) {
     let (mut sources, mut next) = (Vec::new(), Crust::default());
     resample_locate_cpu(mesh, crust, &table, &rules, &mut sources);
     interpolate(mesh, crust, &table, &sources, &mut next);
-    let gap_ids: Vec<u32> = sources
+    // The gaps as the resampling lists them (this also fills them, on a copy).
+    let gap_ids: Vec<u32> = gaps_from_nearest(mesh, &sources, &mut next.clone())
         .iter()
-        .enumerate()
-        .filter(|(_, s)| s.is_gap())
-        .map(|(j, _)| j as u32)
+        .map(|g| g.sample)
         .collect();
     let plate = &next.plate;
     let no = tectonic_planets::resources::NO_PLATE;

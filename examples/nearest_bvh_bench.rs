@@ -69,23 +69,26 @@ fn build_trees(side: &Side, origin: &[DVec3]) -> GroupTrees {
     let trees = labels
         .into_par_iter()
         .map(|ls| {
-            let boxes: Vec<Aabb> = ls
-                .iter()
-                .map(|&l| {
-                    let p = origin[l as usize];
-                    let p = Vec3A::new(p.x as f32, p.y as f32, p.z as f32);
-                    Aabb::new(p - 1e-6, p + 1e-6)
-                })
-                .collect();
-            let bvh = build_bvh2(
-                &boxes,
-                BvhBuildParams::fast_build(),
-                &mut Duration::default(),
-            );
+            let bvh = point_bvh(ls.iter().map(|&l| origin[l as usize]));
             (bvh, ls)
         })
         .collect();
     GroupTrees { slot, trees }
+}
+
+/// A BVH over points, a small box each (`fast_build`); its primitives are the points in order.
+fn point_bvh(points: impl Iterator<Item = DVec3>) -> Bvh2 {
+    let boxes: Vec<Aabb> = points
+        .map(|p| {
+            let p = Vec3A::new(p.x as f32, p.y as f32, p.z as f32);
+            Aabb::new(p - 1e-6, p + 1e-6)
+        })
+        .collect();
+    build_bvh2(
+        &boxes,
+        BvhBuildParams::fast_build(),
+        &mut Duration::default(),
+    )
 }
 
 fn box_dist2(b: &Aabb, q: Vec3A) -> f32 {
@@ -467,19 +470,7 @@ fn gaps(sim: &mut Simulation) {
             .filter(|&i| seed_of[i])
             .map(|i| (i as u32, plate[i]))
             .collect();
-        let boxes: Vec<Aabb> = seeds
-            .iter()
-            .map(|&(s, _)| {
-                let p = mesh.positions[s as usize];
-                let p = Vec3A::new(p.x as f32, p.y as f32, p.z as f32);
-                Aabb::new(p - 1e-6, p + 1e-6)
-            })
-            .collect();
-        let bvh = build_bvh2(
-            &boxes,
-            BvhBuildParams::fast_build(),
-            &mut Duration::default(),
-        );
+        let bvh = point_bvh(seeds.iter().map(|&(s, _)| mesh.positions[s as usize]));
         build_ms.push(t.elapsed().as_secs_f64() * 1e3);
         let t = Instant::now();
         got = gap_ids

@@ -415,6 +415,27 @@ fn two_nearest(
     best
 }
 
+/// The BVH's seeds: the covered samples next to a gap (sample, plate), once each, in sample order.
+fn gap_seeds(mesh: &SphereMesh, plate: &[u32], gap_ids: &[u32]) -> Vec<(u32, u32)> {
+    let no = tectonic_planets::resources::NO_PLATE;
+    let mut is_gap = vec![false; mesh.len()];
+    for &g in gap_ids {
+        is_gap[g as usize] = true;
+    }
+    let mut seed_of = vec![false; mesh.len()];
+    for &g in gap_ids {
+        for &nb in mesh.neighbors_of(g as usize) {
+            if !is_gap[nb as usize] && plate[nb as usize] != no {
+                seed_of[nb as usize] = true;
+            }
+        }
+    }
+    (0..mesh.len())
+        .filter(|&i| seed_of[i])
+        .map(|i| (i as u32, plate[i]))
+        .collect()
+}
+
 fn gaps(sim: &mut Simulation) {
     let table = sim.plate_table();
     let world = sim.world();
@@ -437,7 +458,6 @@ fn gaps(sim: &mut Simulation) {
         .map(|g| g.sample)
         .collect();
     let plate = &next.plate;
-    let no = tectonic_planets::resources::NO_PLATE;
     println!(
         "gaps of a resampling {} steps after the last: {} samples",
         world
@@ -453,23 +473,7 @@ fn gaps(sim: &mut Simulation) {
         want = nearest_two_plates(mesh, plate, &gap_ids);
         graph_ms.push(t.elapsed().as_secs_f64() * 1e3);
         let t = Instant::now();
-        // The seeds: covered samples next to a gap, once each, in sample order.
-        let mut is_gap = vec![false; mesh.len()];
-        for &g in &gap_ids {
-            is_gap[g as usize] = true;
-        }
-        let mut seed_of = vec![false; mesh.len()];
-        for &g in &gap_ids {
-            for &nb in mesh.neighbors_of(g as usize) {
-                if !is_gap[nb as usize] && plate[nb as usize] != no {
-                    seed_of[nb as usize] = true;
-                }
-            }
-        }
-        let seeds: Vec<(u32, u32)> = (0..mesh.len())
-            .filter(|&i| seed_of[i])
-            .map(|i| (i as u32, plate[i]))
-            .collect();
+        let seeds = gap_seeds(mesh, plate, &gap_ids);
         let bvh = point_bvh(seeds.iter().map(|&(s, _)| mesh.positions[s as usize]));
         build_ms.push(t.elapsed().as_secs_f64() * 1e3);
         let t = Instant::now();
@@ -494,19 +498,7 @@ fn gaps(sim: &mut Simulation) {
     }
     // The BVH's answers checked by brute force over all seeds, on every 61st gap sample.
     {
-        let mut seeds: Vec<(u32, u32)> = Vec::new();
-        let mut is_gap = vec![false; mesh.len()];
-        for &g in &gap_ids {
-            is_gap[g as usize] = true;
-        }
-        for i in 0..mesh.len() {
-            if !is_gap[i]
-                && plate[i] != no
-                && mesh.neighbors_of(i).iter().any(|&nb| is_gap[nb as usize])
-            {
-                seeds.push((i as u32, plate[i]));
-            }
-        }
+        let seeds = gap_seeds(mesh, plate, &gap_ids);
         for (k, &g) in gap_ids.iter().enumerate().step_by(61) {
             let q = mesh.positions[g as usize];
             let c2 = |s: u32| (mesh.positions[s as usize] - q).length_squared();

@@ -493,15 +493,12 @@ fn bench_from_a_save_times_the_saved_planet() {
     std::fs::create_dir_all(&dir).unwrap();
     let save = save_small_planet(&dir, "b.planet", "30", &[]);
     let save_s = save.to_str().expect("a UTF-8 path");
-    let stdout = planet_ok(&[
-        "bench",
-        "--steps",
-        "3",
-        "--resamplings",
-        "0",
-        "--from",
-        save_s,
-    ]);
+    // Three steps, no resampling, from the save, with `extra` arguments.
+    let bench_from = |extra: &[&str]| {
+        let head = ["bench", "--steps", "3", "--resamplings", "0"];
+        planet_ok(&[&head[..], extra, &["--from", save_s]].concat())
+    };
+    let stdout = bench_from(&[]);
     assert!(stdout.contains("planet bench: 4000 samples"), "{stdout}");
     let loaded = stdout
         .lines()
@@ -521,29 +518,13 @@ fn bench_from_a_save_times_the_saved_planet() {
         "{stdout}"
     );
     // `--relief-every` applies to the loaded planet.
-    let stdout = planet_ok(&[
-        "bench",
-        "--steps",
-        "3",
-        "--resamplings",
-        "0",
-        "--relief-every",
-        "1",
-        "--from",
-        save_s,
-    ]);
+    let stdout = bench_from(&["--relief-every", "1"]);
     assert!(
         stdout.contains("a drainage network every 1 steps"),
         "{stdout}"
     );
     fails_with(
-        &[
-            "bench",
-            "--relief-every",
-            "0",
-            "--from",
-            save.to_str().unwrap(),
-        ],
+        &["bench", "--relief-every", "0", "--from", save_s],
         &["relief_interval_steps", "1..=16"],
     );
     fails_with(

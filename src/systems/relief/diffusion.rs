@@ -302,7 +302,12 @@ pub fn diffuse_land(
                 }
             }
         });
-        for _ in 0..substeps {
+        for s in 0..substeps {
+            if s > 0 {
+                // The last sub-step's heights are read by this one; the last one leaves its
+                // heights in `next`, as the one-step path does.
+                std::mem::swap(&mut scratch.h, &mut scratch.next);
+            }
             let h = &scratch.h;
             diffusion_substep(
                 g,
@@ -314,10 +319,7 @@ pub fn diffuse_land(
                 &scratch.coast,
                 &mut scratch.receipts,
             );
-            std::mem::swap(&mut scratch.h, &mut scratch.next);
         }
-        // The last sub-step's heights back in `next`, where the one-step path leaves them.
-        std::mem::swap(&mut scratch.h, &mut scratch.next);
     }
     let mut budget = DiffusionBudget {
         substeps,

@@ -41,6 +41,8 @@ pub mod stream {
     pub const RIFT_COMMAND: u64 = 6;
     /// Impact craters of the initial planet (centres and radii).
     pub const CRATER: u64 = 7;
+    /// The pelagic rain's rate field (`sediment.pelagic_variability`).
+    pub const PELAGIC: u64 = 8;
     /// Noise fields (each field adds its own offset).
     pub const NOISE: u64 = 100;
 }

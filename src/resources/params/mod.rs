@@ -339,6 +339,8 @@ define_params! {
         pelagic_max_age_my: f64 = 150.0, 0.0..=10000.0, "My", "Pelagic sediment settles on sea floor younger than this (old floor lies below the carbonate compensation depth, where little settles), which bounds the layer to rate × age.";
         pelagic_ccd_m: f64 = 0.0, 0.0..=11000.0, "m", "Carbonate compensation depth (CCD): below it the shells of the pelagic rain dissolve before they settle and only clay (`pelagic_clay_rate_m_per_my`) is laid; over the 1 km above it (the lysocline to the CCD) the rain falls linearly from `pelagic_rate_m_per_my` to the clay's. Earth: 4.2–5 km (Pacific to Atlantic). 0: off, the full rain at every depth.";
         pelagic_clay_rate_m_per_my: f64 = 1.0, 0.0..=1000.0, "m/My", "Pelagic clay (dust, the shells' insoluble remains) laid below the carbonate compensation depth (`pelagic_ccd_m`; abyssal red clay builds at 0.5–2 m/My).";
+        pelagic_variability: f64 = 0.0, 0.0..=3.0, "", "How much the pelagic rain varies from place to place (0, the default: the same everywhere): the rate is multiplied by exp(σ·F), F a smooth noise field of unit spread fixed in the mantle frame, scaled so the rain's mean over the globe stays `pelagic_rate_m_per_my`. Earth's rates range tenfold, from red clay under the gyres to ooze under upwelling (σ ≈ 0.7 spans ×0.3 to ×3.2 between the 5th and 95th percentiles). It spreads the floor's depths (docs/relief.md, 2026-12-07).";
+        pelagic_variability_km: f64 = 2000.0, 100.0..=40000.0, "km", "Wavelength of the noise field of `pelagic_variability` (its first octave, of three).";
     }
     /// Plate rifting.
     [rifting] Rifting {
@@ -985,7 +987,7 @@ mod tests {
     #[test]
     fn schema_is_consistent() {
         let schema = Params::schema();
-        assert_eq!(schema.len(), 114);
+        assert_eq!(schema.len(), 116);
         assert_eq!(schema.len(), BOUNDS.len());
         let mut seen = HashSet::new();
         for (spec, (lo, hi)) in schema.iter().zip(BOUNDS) {

@@ -862,3 +862,21 @@ fn bench_per_step_rows_add_up_within_each_step() {
         );
     }
 }
+
+/// `generate` draws the pelagic rain's field (`pelagic_rate.png`, at the maps' size) when the
+/// rain varies from place to place, and draws none when it is the same everywhere.
+#[test]
+fn generate_draws_the_pelagic_rain_only_when_it_varies() {
+    let dir = temp_dir("pelagic-config");
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("varied.toml");
+    std::fs::write(&cfg, "[sediment]\npelagic_variability = 1.0\n").unwrap();
+    let cfg = cfg.to_string_lossy().into_owned();
+    let (o, out) = small_generate("pelagic-varied", "4", &["--config", &cfg]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let img = image::open(out.join("pelagic_rate.png")).expect("pelagic_rate.png");
+    assert_eq!((img.width(), img.height()), (128, 64));
+    let (o, out) = small_generate("pelagic-same", "4", &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!out.join("pelagic_rate.png").exists());
+}

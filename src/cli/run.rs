@@ -444,6 +444,13 @@ pub(crate) fn write_outputs(sim: &mut Simulation, out: &Path, width: u32) -> Res
         sim.network_options(),
     );
     files.extend(write_rivers(&raster, sim.mesh(), &rivers, out, radius_km)?);
+    // With a pelagic rain that varies from place to place, its map.
+    let rate = tectonic_planets::systems::relief::pelagic_rate_of(sim.mesh(), sim.params());
+    if let Some(p) =
+        tectonic_planets::io::maps::write_pelagic_rate(&raster, sim.mesh(), &rate, out)?
+    {
+        files.push(p);
+    }
     let mut summary = summarize(sim, &view);
     summary.drainage = Some(rivers.summary(sim.mesh()));
     let step = sim.clock().step;

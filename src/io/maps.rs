@@ -611,6 +611,83 @@ where
     })
 }
 
+/// Colour of pelagic rain `m` times the globe's mean (`pelagic_rate.png`), log scale: pale sand
+/// where a fifth of the mean or less settles (red clay under the gyres), pale blue at the mean,
+/// deep teal where five times the mean or more does (ooze under upwelling).
+pub fn pelagic_colour(m: f64) -> [u8; 3] {
+    const STOPS: [(f64, [f64; 3]); 4] = [
+        (-2.32, [236.0, 222.0, 190.0]),
+        (0.0, [150.0, 200.0, 220.0]),
+        (1.2, [40.0, 130.0, 160.0]),
+        (2.32, [10.0, 60.0, 90.0]),
+    ];
+    let x = if m > 0.0 { m.log2() } else { f64::NEG_INFINITY };
+    to_u8(ramp(&STOPS, x))
+}
+
+/// The map of a pelagic rain that varies from place to place (`pelagic_rate.png`, see
+/// `sediment.pelagic_variability`): the rain's multiplier `rate` (one per sample of `mesh`,
+/// interpolated in the triangle under each pixel) in [`pelagic_colour`] over the sea of
+/// `raster`, the land grey. `None` when `rate` does not cover the mesh (the same rain
+/// everywhere).
+pub fn pelagic_rate_image(
+    raster: &Raster,
+    mesh: &crate::geometry::SphereMesh,
+    rate: &[f32],
+) -> Option<RgbImage> {
+    if rate.is_empty() || rate.len() != mesh.len() {
+        return None;
+    }
+    let (w, h) = (raster.width, raster.height);
+    let mut px = vec![[0u8; 3]; w as usize * h as usize];
+    px.par_chunks_mut((w as usize).max(1))
+        .enumerate()
+        .for_each(|(row, line)| {
+            let mut hint = u32::MAX;
+            for (col, o) in line.iter_mut().enumerate() {
+                let k = row * w as usize + col;
+                if raster.samples.get(k).is_none_or(|s| s.elevation_m > 0.0) {
+                    *o = [120, 120, 120];
+                    continue;
+                }
+                let d =
+                    glam::DVec3::from_array(Raster::pixel_direction(w, h, col as u32, row as u32));
+                let loc = crate::amplify::hinted_locate(mesh, d, hint);
+                hint = loc.triangle;
+                let m: f64 = mesh
+                    .triangles
+                    .get(loc.triangle as usize)
+                    .map(|t| {
+                        t.iter()
+                            .zip(loc.weights)
+                            .map(|(&s, wt)| wt * f64::from(rate[s as usize]))
+                            .sum()
+                    })
+                    .unwrap_or(1.0);
+                *o = pelagic_colour(m);
+            }
+        });
+    Some(RgbImage::from_fn(w, h, |c, r| {
+        image::Rgb(px[(r * w + c) as usize])
+    }))
+}
+
+/// Writes `pelagic_rate.png` ([`pelagic_rate_image`]) into `dir` and returns its path; `None`
+/// (nothing written) with the same rain everywhere.
+pub fn write_pelagic_rate(
+    raster: &Raster,
+    mesh: &crate::geometry::SphereMesh,
+    rate: &[f32],
+    dir: &Path,
+) -> Result<Option<PathBuf>, MapError> {
+    let Some(img) = pelagic_rate_image(raster, mesh, rate) else {
+        return Ok(None);
+    };
+    let path = dir.join("pelagic_rate.png");
+    save_png(&img, &path)?;
+    Ok(Some(path))
+}
+
 /// Writes elevation.png, plates.png, crust_age.png, crust_type.png, elevation16.png and elevation16.json into `dir` (created if missing).
 /// Returns the paths written, in that order. Images are rendered in parallel.
 pub fn write_all_maps(
@@ -815,6 +892,41 @@ mod tests {
                 age_my: if land { 0.0 } else { 10.0 },
             }
         }
+    }
+
+    /// The pelagic rain's map: land grey, the sea coloured by the rain's multiplier there
+    /// (darker where more settles), nothing without a field. Seen to fail with the colour read
+    /// from the wrong end of the ramp.
+    #[test]
+    fn the_pelagic_rate_map_colours_the_sea_by_its_rain() {
+        let mesh = crate::geometry::SphereMesh::fibonacci(2_000, 0.0, 0, 6371.0).expect("mesh");
+        let r = Raster::sample(&HalfLand, 64, 32).expect("sample");
+        assert!(pelagic_rate_image(&r, &mesh, &[]).is_none());
+        // Five times the mean in the north, a fifth in the south.
+        let rate: Vec<f32> = mesh
+            .positions
+            .iter()
+            .map(|p| if p.z > 0.0 { 5.0 } else { 0.2 })
+            .collect();
+        let img = pelagic_rate_image(&r, &mesh, &rate).expect("a map");
+        let brightness = |c: u32, row: u32| {
+            img.get_pixel(c, row)
+                .0
+                .iter()
+                .map(|&v| u32::from(v))
+                .sum::<u32>()
+        };
+        // Pixel columns 0..16 and 48..64 lie at x < 0 (sea), 16..48 at x > 0 (land).
+        let land = img.get_pixel(32, 16).0;
+        assert_eq!(land, [120, 120, 120]);
+        let (north, south) = (brightness(2, 4), brightness(2, 27));
+        assert_eq!(img.get_pixel(2, 4).0, pelagic_colour(5.0));
+        assert_eq!(img.get_pixel(2, 27).0, pelagic_colour(0.2));
+        assert!(
+            north < south,
+            "north {north}, south {south}: more rain is darker"
+        );
+        assert!(pelagic_colour(1.0) != pelagic_colour(5.0));
     }
 
     fn raster_of(elevs: &[f32]) -> Raster {

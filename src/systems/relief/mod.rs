@@ -457,21 +457,28 @@ impl PelagicField {
             r.to_bits(),
         );
         if self.key != Some(key) {
-            self.rate = if s.pelagic_variability > 0.0 {
-                pelagic_rate_field(
-                    &mesh.positions,
-                    &mesh.area_km2,
-                    crate::random::hash3(params.planet.seed, crate::random::stream::PELAGIC, 0),
-                    s.pelagic_variability,
-                    s.pelagic_variability_km / r,
-                )
-            } else {
-                Vec::new()
-            };
+            self.rate = pelagic_rate_of(mesh, params);
             self.key = Some(key);
         }
         &self.rate
     }
+}
+
+/// The pelagic rain's multiplier at each sample of `mesh` under `params` (the field of
+/// [`pelagic_rate_field`] for `sediment.pelagic_variability`, from the planet seed's own random
+/// stream); empty with the same rain everywhere. What the rain of a run uses, for maps.
+pub fn pelagic_rate_of(mesh: &SphereMesh, params: &Params) -> Vec<f32> {
+    let s = &params.sediment;
+    if !(s.pelagic_variability > 0.0) {
+        return Vec::new();
+    }
+    pelagic_rate_field(
+        &mesh.positions,
+        &mesh.area_km2,
+        crate::random::hash3(params.planet.seed, crate::random::stream::PELAGIC, 0),
+        s.pelagic_variability,
+        s.pelagic_variability_km / params.planet.radius_km,
+    )
 }
 
 /// The multiplier of the pelagic rain at each of `positions` (unit vectors in the mantle frame)

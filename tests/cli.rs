@@ -864,7 +864,8 @@ fn bench_per_step_rows_add_up_within_each_step() {
 }
 
 /// `generate` draws the pelagic rain's field (`pelagic_rate.png`, at the maps' size) when the
-/// rain varies from place to place, and draws none when it is the same everywhere.
+/// rain varies from place to place, and draws none when it is the same everywhere or when the
+/// sediment (which lays it) is off.
 #[test]
 fn generate_draws_the_pelagic_rain_only_when_it_varies() {
     let dir = temp_dir("pelagic-config");
@@ -877,6 +878,14 @@ fn generate_draws_the_pelagic_rain_only_when_it_varies() {
     let img = image::open(out.join("pelagic_rate.png")).expect("pelagic_rate.png");
     assert_eq!((img.width(), img.height()), (128, 64));
     let (o, out) = small_generate("pelagic-same", "4", &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!out.join("pelagic_rate.png").exists());
+    // Nor with the sediment, which lays the rain, switched off.
+    let (o, out) = small_generate(
+        "pelagic-no-sediment",
+        "4",
+        &["--config", &cfg, "--disable", "sediment"],
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(!out.join("pelagic_rate.png").exists());
 }

@@ -444,8 +444,17 @@ pub(crate) fn write_outputs(sim: &mut Simulation, out: &Path, width: u32) -> Res
         sim.network_options(),
     );
     files.extend(write_rivers(&raster, sim.mesh(), &rivers, out, radius_km)?);
-    // With a pelagic rain that varies from place to place, its map.
-    let rate = tectonic_planets::systems::relief::pelagic_rate_of(sim.mesh(), sim.params());
+    // With a pelagic rain that varies from place to place (and the sediment that lays it on),
+    // its map.
+    let rains = sim
+        .world()
+        .get_resource::<tectonic_planets::plugins::Phenomena>()
+        .is_some_and(|p| p.is_enabled("sediment"));
+    let rate = if rains {
+        tectonic_planets::systems::relief::pelagic_rate_of(sim.mesh(), sim.params())
+    } else {
+        Vec::new()
+    };
     if let Some(p) =
         tectonic_planets::io::maps::write_pelagic_rate(&raster, sim.mesh(), &rate, out)?
     {

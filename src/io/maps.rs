@@ -625,19 +625,17 @@ pub fn pelagic_colour(m: f64) -> [u8; 3] {
     to_u8(ramp(&STOPS, x))
 }
 
-/// The map of a pelagic rain that varies from place to place (`pelagic_rate.png`, see
-/// `sediment.pelagic_variability`): the rain's multiplier `rate` (one per sample of `mesh`,
-/// interpolated in the triangle under each pixel) in [`pelagic_colour`] over the sea of
-/// `raster`, the land grey. `None` when `rate` does not cover the mesh (the same rain
-/// everywhere).
-pub fn pelagic_rate_image(
+/// A map of `field` (one value per sample of `mesh`, interpolated in the triangle under each
+/// pixel) in `colour`, except where `fixed` gives a pixel its colour from the raster's sample
+/// there (`None` past the raster's samples): the land of a sea-floor map, the sea of a land map.
+/// Rows in parallel, each walking its triangles from the last one found.
+pub fn field_image(
     raster: &Raster,
     mesh: &crate::geometry::SphereMesh,
-    rate: &[f32],
-) -> Option<RgbImage> {
-    if rate.is_empty() || rate.len() != mesh.len() {
-        return None;
-    }
+    field: &[f32],
+    fixed: impl Fn(Option<&MapSample>) -> Option<[u8; 3]> + Sync,
+    colour: impl Fn(f64) -> [u8; 3] + Sync,
+) -> RgbImage {
     let (w, h) = (raster.width, raster.height);
     let mut px = vec![[0u8; 3]; w as usize * h as usize];
     px.par_chunks_mut((w as usize).max(1))
@@ -646,30 +644,52 @@ pub fn pelagic_rate_image(
             let mut hint = u32::MAX;
             for (col, o) in line.iter_mut().enumerate() {
                 let k = row * w as usize + col;
-                if raster.samples.get(k).is_none_or(|s| s.elevation_m > 0.0) {
-                    *o = [120, 120, 120];
+                if let Some(c) = fixed(raster.samples.get(k)) {
+                    *o = c;
                     continue;
                 }
                 let d =
                     glam::DVec3::from_array(Raster::pixel_direction(w, h, col as u32, row as u32));
                 let loc = crate::amplify::hinted_locate(mesh, d, hint);
                 hint = loc.triangle;
-                let m: f64 = mesh
+                let v: f64 = mesh
                     .triangles
                     .get(loc.triangle as usize)
                     .map(|t| {
                         t.iter()
                             .zip(loc.weights)
-                            .map(|(&s, wt)| wt * f64::from(rate[s as usize]))
+                            .map(|(&s, wt)| wt * f64::from(field[s as usize]))
                             .sum()
                     })
                     .unwrap_or(1.0);
-                *o = pelagic_colour(m);
+                *o = colour(v);
             }
         });
-    Some(RgbImage::from_fn(w, h, |c, r| {
-        image::Rgb(px[(r * w + c) as usize])
-    }))
+    RgbImage::from_fn(w, h, |c, r| image::Rgb(px[(r * w + c) as usize]))
+}
+
+/// The map of a pelagic rain that varies from place to place (`pelagic_rate.png`, see
+/// `sediment.pelagic_variability`): the rain's multiplier `rate` (one per sample of `mesh`) in
+/// [`pelagic_colour`] over the sea of `raster` (see [`field_image`]), the land grey. `None`
+/// when `rate` does not cover the mesh (the same rain everywhere).
+pub fn pelagic_rate_image(
+    raster: &Raster,
+    mesh: &crate::geometry::SphereMesh,
+    rate: &[f32],
+) -> Option<RgbImage> {
+    if rate.is_empty() || rate.len() != mesh.len() {
+        return None;
+    }
+    Some(field_image(
+        raster,
+        mesh,
+        rate,
+        |s| {
+            s.is_none_or(|s| s.elevation_m > 0.0)
+                .then_some([120, 120, 120])
+        },
+        pelagic_colour,
+    ))
 }
 
 /// Writes `pelagic_rate.png` ([`pelagic_rate_image`]) into `dir` and returns its path; `None`

@@ -411,39 +411,19 @@ pub fn rain_colour(r: f32) -> [u8; 3] {
 /// The rain map (`precipitation.png`): the network's rain ([`RiverNetwork::rain`]) over the
 /// land in [`rain_colour`], the sea dark blue, rivers on top; `None` with uniform rain.
 pub fn rain_image(raster: &Raster, mesh: &SphereMesh, net: &RiverNetwork) -> Option<RgbImage> {
-    use rayon::prelude::*;
     if net.rain.len() != mesh.len() || net.len() != mesh.len() {
         return None;
     }
-    let (w, h) = (raster.width, raster.height);
-    let mut px = vec![[0u8; 3]; w as usize * h as usize];
-    px.par_chunks_mut((w as usize).max(1))
-        .enumerate()
-        .for_each(|(row, line)| {
-            let mut hint = u32::MAX;
-            for (col, o) in line.iter_mut().enumerate() {
-                let k = row * w as usize + col;
-                if raster.samples.get(k).is_none_or(|s| s.elevation_m <= 0.0) {
-                    *o = [28, 52, 86];
-                    continue;
-                }
-                let d = DVec3::from_array(Raster::pixel_direction(w, h, col as u32, row as u32));
-                let loc = crate::amplify::hinted_locate(mesh, d, hint);
-                hint = loc.triangle;
-                let r: f64 = mesh
-                    .triangles
-                    .get(loc.triangle as usize)
-                    .map(|t| {
-                        t.iter()
-                            .zip(loc.weights)
-                            .map(|(&s, wt)| wt * f64::from(net.rain[s as usize]))
-                            .sum()
-                    })
-                    .unwrap_or(1.0);
-                *o = rain_colour(r as f32);
-            }
-        });
-    let mut img = RgbImage::from_fn(w, h, |c, r| image::Rgb(px[(r * w + c) as usize]));
+    let mut img = crate::io::maps::field_image(
+        raster,
+        mesh,
+        &net.rain,
+        |s| {
+            s.is_none_or(|s| s.elevation_m <= 0.0)
+                .then_some([28, 52, 86])
+        },
+        |r| rain_colour(r as f32),
+    );
     draw_rivers(&mut img, &mesh.positions, net);
     Some(img)
 }

@@ -628,8 +628,9 @@ pub fn pelagic_colour(m: f64) -> [u8; 3] {
 /// A map of `field` (one value per sample of `mesh`, interpolated in the triangle under each
 /// pixel) in `colour`, except where `fixed` gives a pixel its colour from the raster's sample
 /// there (`None` past the raster's samples): the land of a sea-floor map, the sea of a land map.
-/// Rows in parallel, each walking its triangles from the last one found.
-pub fn field_image(
+/// Rows in parallel, each walking its triangles from the last one found. `field` must cover
+/// the mesh (the callers check).
+pub(crate) fn field_image(
     raster: &Raster,
     mesh: &crate::geometry::SphereMesh,
     field: &[f32],

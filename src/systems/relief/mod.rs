@@ -444,8 +444,9 @@ struct PelagicField {
 }
 
 impl PelagicField {
-    /// Builds the field for `mesh` and `params` unless it is built already; empty when
-    /// `sediment.pelagic_variability` is 0 (the same rain everywhere).
+    /// Builds the field for `mesh` and `params` unless it is built already (the field of
+    /// [`pelagic_rate_field`] for `sediment.pelagic_variability`, from the planet seed's own
+    /// random stream); empty when σ is 0 (the same rain everywhere).
     fn ensure(&mut self, mesh: &SphereMesh, params: &Params) -> &[f32] {
         let s = &params.sediment;
         let r = params.planet.radius_km;
@@ -457,28 +458,17 @@ impl PelagicField {
             r.to_bits(),
         );
         if self.key != Some(key) {
-            self.rate = pelagic_rate_of(mesh, params);
+            self.rate = pelagic_rate_field(
+                &mesh.positions,
+                &mesh.area_km2,
+                crate::random::hash3(params.planet.seed, crate::random::stream::PELAGIC, 0),
+                s.pelagic_variability,
+                s.pelagic_variability_km / r,
+            );
             self.key = Some(key);
         }
         &self.rate
     }
-}
-
-/// The pelagic rain's multiplier at each sample of `mesh` under `params` (the field of
-/// [`pelagic_rate_field`] for `sediment.pelagic_variability`, from the planet seed's own random
-/// stream); empty with the same rain everywhere. What the rain of a run uses, for maps.
-pub fn pelagic_rate_of(mesh: &SphereMesh, params: &Params) -> Vec<f32> {
-    let s = &params.sediment;
-    if !(s.pelagic_variability > 0.0) {
-        return Vec::new();
-    }
-    pelagic_rate_field(
-        &mesh.positions,
-        &mesh.area_km2,
-        crate::random::hash3(params.planet.seed, crate::random::stream::PELAGIC, 0),
-        s.pelagic_variability,
-        s.pelagic_variability_km / params.planet.radius_km,
-    )
 }
 
 /// The multiplier of the pelagic rain at each of `positions` (unit vectors in the mantle frame)
@@ -508,20 +498,26 @@ pub fn pelagic_rate_field(
     if !(total > 0.0) {
         return Vec::new();
     }
-    let mean = f.iter().zip(area).map(|(x, a)| x * a).sum::<f64>() / total;
-    let var = f
-        .iter()
-        .zip(area)
-        .map(|(x, a)| (x - mean) * (x - mean) * a)
-        .sum::<f64>()
-        / total;
+    // Area-weighted mean of `g` over `xs`, summed in sample order.
+    let mean_of = |xs: &[f64], g: &dyn Fn(f64) -> f64| {
+        xs.iter().zip(area).map(|(&x, a)| g(x) * a).sum::<f64>() / total
+    };
+    let mean = mean_of(&f, &|x| x);
+    let var = mean_of(&f, &|x| (x - mean) * (x - mean));
     let scale = if var > 0.0 { sigma / var.sqrt() } else { 0.0 };
     let e: Vec<f64> = f.iter().map(|x| ((x - mean) * scale).exp()).collect();
-    let e_mean = e.iter().zip(area).map(|(x, a)| x * a).sum::<f64>() / total;
+    let e_mean = mean_of(&e, &|x| x);
     e.iter().map(|x| (x / e_mean) as f32).collect()
 }
 
 impl ReliefState {
+    /// The pelagic rain's multiplier at each sample of `mesh` under `params` (see
+    /// [`pelagic_rate_field`]): the field the rain uses, built here if no rain has yet (a planet
+    /// just loaded); empty with the same rain everywhere.
+    pub fn pelagic_rate(&mut self, mesh: &SphereMesh, params: &Params) -> &[f32] {
+        self.pelagic.ensure(mesh, params)
+    }
+
     /// Frees the relief passes' work areas (rebuilt at their next use): see
     /// [`crate::simulation::Simulation::release_scratch`]. Keeps the graph, the caches, the
     /// router's limit on overflows and what the summary reads (the trench depths, the sea level,

@@ -450,17 +450,13 @@ pub(crate) fn write_outputs(sim: &mut Simulation, out: &Path, width: u32) -> Res
         .world()
         .get_resource::<tectonic_planets::plugins::Phenomena>()
         .is_some_and(|p| p.is_enabled("sediment"));
-    let (mesh, params) = (sim.mesh().clone(), sim.params().clone());
     if rains
-        && let Some(mut state) = sim
-            .world_mut()
-            .get_resource_mut::<tectonic_planets::systems::relief::ReliefState>()
-        && let Some(p) = tectonic_planets::io::maps::write_pelagic_rate(
-            &raster,
-            &mesh,
-            state.pelagic_rate(&mesh, &params),
-            out,
-        )?
+        && let Some(p) = sim
+            .with_pelagic_rate(|mesh, rate| {
+                tectonic_planets::io::maps::write_pelagic_rate(&raster, mesh, rate, out)
+            })
+            .transpose()?
+            .flatten()
     {
         files.push(p);
     }

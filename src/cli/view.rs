@@ -37,7 +37,7 @@ pub(crate) struct ViewArgs {
     #[arg(long, value_name = "STEPS")]
     pub(crate) speed: Option<f64>,
     /// Map colouring at start: elevation, plates, crust_type, oceanic_age, orogeny_type,
-    /// orogeny_age, laplacian, rivers, basins, thickness.
+    /// orogeny_age, laplacian, rivers, basins, thickness, rain, pelagic_rain.
     #[arg(long, default_value = "elevation")]
     pub(crate) overlay: String,
     /// Vector layers drawn at start, comma-separated: folds, ridges, velocity, fronts, terranes.

@@ -625,6 +625,9 @@ pub fn pelagic_colour(m: f64) -> [u8; 3] {
     to_u8(ramp(&STOPS, x))
 }
 
+/// Colour of the land on the pelagic rain's map (the viewer's too).
+pub const PELAGIC_LAND: [u8; 3] = [120, 120, 120];
+
 /// A map of `field` (one value per sample of `mesh`, interpolated in the triangle under each
 /// pixel) in `colour`, except where `fixed` gives a pixel its colour from the raster's sample
 /// there (`None` past the raster's samples): the land of a sea-floor map, the sea of a land map.
@@ -687,7 +690,7 @@ pub fn pelagic_rate_image(
         rate,
         |s| {
             s.is_none_or(|s| s.elevation_m > 0.0)
-                .then_some([120, 120, 120])
+                .then_some(PELAGIC_LAND)
         },
         pelagic_colour,
     ))

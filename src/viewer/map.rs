@@ -42,11 +42,13 @@ pub enum BaseLayer {
     Thickness,
     /// Relative rain over the land (the phenomenon `climate`), rivers on top.
     Rain,
+    /// Relative pelagic rain over the sea (`sediment.pelagic_variability`), the land grey.
+    PelagicRain,
 }
 
 impl BaseLayer {
     /// Every base layer, in menu order.
-    pub const ALL: [BaseLayer; 11] = [
+    pub const ALL: [BaseLayer; 12] = [
         Self::Elevation,
         Self::Plates,
         Self::CrustType,
@@ -58,6 +60,7 @@ impl BaseLayer {
         Self::Basins,
         Self::Thickness,
         Self::Rain,
+        Self::PelagicRain,
     ];
     /// Menu label.
     pub fn label(self) -> &'static str {
@@ -73,6 +76,7 @@ impl BaseLayer {
             Self::Basins => "Drainage basins",
             Self::Thickness => "Crust thickness",
             Self::Rain => "Rain",
+            Self::PelagicRain => "Pelagic rain",
         }
     }
 }
@@ -80,7 +84,7 @@ impl BaseLayer {
 impl std::str::FromStr for BaseLayer {
     type Err = String;
     /// A layer by name (`elevation`, `plates`, `crust_type`, `oceanic_age`, `orogeny_type`,
-    /// `orogeny_age`, `laplacian`, `rivers`, `basins`, `thickness`, `rain`).
+    /// `orogeny_age`, `laplacian`, `rivers`, `basins`, `thickness`, `rain`, `pelagic_rain`).
     fn from_str(s: &str) -> Result<Self, String> {
         let names = [
             "elevation",
@@ -94,6 +98,7 @@ impl std::str::FromStr for BaseLayer {
             "basins",
             "thickness",
             "rain",
+            "pelagic_rain",
         ];
         names
             .iter()
@@ -237,6 +242,7 @@ pub fn render_base(s: &Snapshot, layer: BaseLayer) -> ColorImage {
         BaseLayer::Rivers => rivers_image(s),
         BaseLayer::Basins => basins_image(s),
         BaseLayer::Rain => rain_image(s),
+        BaseLayer::PelagicRain => pelagic_rain_image(s),
         BaseLayer::Thickness => {
             const STOPS: [(f32, [u8; 3]); 6] = [
                 (0.0, [10, 20, 60]),
@@ -294,6 +300,28 @@ fn rain_image(s: &Snapshot) -> ColorImage {
         rivers::draw_rivers(&mut img, &s.positions, net);
     }
     rgb_to_color_image(img)
+}
+
+/// The pelagic rain over the sea (as pelagic_rate.png; see
+/// [`crate::io::maps::pelagic_rate_image`]): the snapshot's rain field in
+/// [`crate::io::maps::pelagic_colour`], the land grey. The same rain everywhere shows the
+/// mean's colour; with the sediment off (no rain settles) the sea is dark.
+fn pelagic_rain_image(s: &Snapshot) -> ColorImage {
+    let lk = &s.lookup;
+    let rate = &s.pelagic_rate[..];
+    let varies = rate.len() == s.positions.len();
+    per_pixel(s, |i| {
+        let [r, g, b] = if lk.lerp(&s.crust.elevation_km, i) > 0.0 {
+            crate::io::maps::PELAGIC_LAND
+        } else if !s.pelagic_rain_on {
+            return BASIN_SEA;
+        } else if varies {
+            crate::io::maps::pelagic_colour(lk.lerp(rate, i) as f64)
+        } else {
+            crate::io::maps::pelagic_colour(1.0)
+        };
+        Color32::from_rgb(r, g, b)
+    })
 }
 
 /// Colour of the sea on the basins map.

@@ -378,6 +378,7 @@ fn the_rivers_basins_and_thickness_overlays_render() {
         BaseLayer::Basins,
         BaseLayer::Thickness,
         BaseLayer::Rain,
+        BaseLayer::PelagicRain,
     ] {
         h.click(&format!("overlay:{}", layer.label()));
         h.frame(Vec::new());
@@ -1064,6 +1065,94 @@ fn a_new_or_loaded_planet_stays_on_the_gpu_backend() {
         snap.log
     );
     assert_eq!(on(&h), crate::gpu::ComputeBackend::Gpu, "loaded planet");
+    h.finish();
+}
+
+/// The Pelagic rain layer draws the field the run's rain uses: heavier rain darker over the
+/// sea, the land grey; the mean's colour over the whole sea once the rain is made the same
+/// everywhere (`set_param`), and a dark sea once the sediment that lays it is switched off.
+#[test]
+fn the_pelagic_rain_layer_shows_the_rain_the_run_uses() {
+    use crate::commands::{Command, SettingValue};
+    let mut h = Harness::new(|| {
+        let mut p = small_params();
+        p.sediment.pelagic_variability = 1.0;
+        Simulation::new(p).map_err(|e| e.to_string())
+    });
+    h.step(2);
+    let snap = h.app.snap.clone().unwrap();
+    let used = h.inspect(|sim| sim.with_pelagic_rate(|_, r| r.to_vec()).unwrap());
+    assert_eq!(used.len(), snap.positions.len(), "the rain varies");
+    assert_eq!(
+        *snap.pelagic_rate, used,
+        "the snapshot holds the run's field"
+    );
+    let lk = &snap.lookup;
+    let sea: Vec<usize> = (0..lk.corners.len())
+        .filter(|&i| lk.lerp(&snap.crust.elevation_km, i) <= 0.0)
+        .collect();
+    assert!(sea.len() > lk.corners.len() / 4, "{} sea pixels", sea.len());
+    let img = map::render_base(&snap, BaseLayer::PelagicRain);
+    let [gr, gg, gb] = crate::io::maps::PELAGIC_LAND;
+    let grey = egui::Color32::from_rgb(gr, gg, gb);
+    for i in 0..lk.corners.len() {
+        if lk.lerp(&snap.crust.elevation_km, i) > 0.0 {
+            assert_eq!(img.pixels[i], grey, "land pixel {i}");
+        }
+    }
+    // Over the sea, the quarter with the heaviest rain is darker than the quarter with the
+    // lightest.
+    let mut by_rain: Vec<(f32, usize)> = sea
+        .iter()
+        .map(|&i| (lk.lerp(&snap.pelagic_rate, i), i))
+        .collect();
+    by_rain.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let q = by_rain.len() / 4;
+    let red = |part: &[(f32, usize)]| {
+        part.iter()
+            .map(|&(_, i)| img.pixels[i].r() as f64)
+            .sum::<f64>()
+            / part.len() as f64
+    };
+    let (light, heavy) = (red(&by_rain[..q]), red(&by_rain[by_rain.len() - q..]));
+    assert!(
+        by_rain[by_rain.len() - q].0 > 1.5 * by_rain[q].0,
+        "the rain spreads: {} .. {}",
+        by_rain[q].0,
+        by_rain[by_rain.len() - q].0
+    );
+    assert!(
+        heavy + 60.0 < light,
+        "heavy rain {heavy}, light rain {light}"
+    );
+    // The same rain everywhere: the mean's colour over all the sea.
+    h.app.sim.send(Request::Apply(Command::SetParam {
+        key: "sediment.pelagic_variability".into(),
+        value: SettingValue::Float(0.0),
+    }));
+    h.step(1);
+    let snap = h.app.snap.clone().unwrap();
+    assert!(snap.pelagic_rate.is_empty());
+    let img = map::render_base(&snap, BaseLayer::PelagicRain);
+    let [mr, mg, mb] = crate::io::maps::pelagic_colour(1.0);
+    let mean = egui::Color32::from_rgb(mr, mg, mb);
+    // Share of the sea pixels of `snap`'s map `img` in colour `c`.
+    let sea_in = |snap: &super::worker::Snapshot, img: &egui::ColorImage, c: egui::Color32| {
+        let lk = &snap.lookup;
+        let sea: Vec<usize> = (0..lk.corners.len())
+            .filter(|&i| lk.lerp(&snap.crust.elevation_km, i) <= 0.0)
+            .collect();
+        sea.iter().filter(|&&i| img.pixels[i] == c).count() as f64 / sea.len() as f64
+    };
+    assert_eq!(sea_in(&snap, &img, mean), 1.0, "uniform rain");
+    // No sediment: no rain settles.
+    h.click("phenomenon:sediment");
+    h.settle();
+    h.step(1);
+    let snap = h.app.snap.clone().unwrap();
+    assert!(!snap.pelagic_rain_on);
+    let img = map::render_base(&snap, BaseLayer::PelagicRain);
+    assert_eq!(sea_in(&snap, &img, mean), 0.0, "the sediment is off");
     h.finish();
 }
 

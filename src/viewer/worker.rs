@@ -252,6 +252,12 @@ pub struct Snapshot {
     pub graph: Arc<ReliefGraph>,
     /// The drainage network of `crust`, made on first use ([`Snapshot::rivers`]).
     pub rivers: Arc<OnceLock<RiverNetwork>>,
+    /// The pelagic rain's multiplier at each sample (`sediment.pelagic_variability`: the field
+    /// the run's rain uses, fixed in the mantle frame, so it lines up with `crust`); empty when
+    /// the same rain falls everywhere or none falls.
+    pub pelagic_rate: Arc<Vec<f32>>,
+    /// Whether pelagic rain settles at all (the phenomenon `sediment`, which lays it, is on).
+    pub pelagic_rain_on: bool,
     /// Every plate, by id.
     pub plates: Vec<PlateRow>,
     /// Subduction fronts.
@@ -468,9 +474,15 @@ struct Worker {
     lookup: Arc<PixelLookup>,
     positions: Arc<Vec<DVec3>>,
     graph: Arc<ReliefGraph>,
+    /// The last pelagic rain field published, and what it was built for (mesh generation,
+    /// seed, σ, wavelength, radius): rebuilt only when one of them changes.
+    pelagic: Option<(PelagicKey, Arc<Vec<f32>>)>,
     log: Vec<String>,
     last_publish: Instant,
 }
+
+/// What a published pelagic rain field was built for (see `Worker::pelagic`).
+type PelagicKey = (u64, u64, u64, u64, u64);
 
 impl Worker {
     fn new(
@@ -500,6 +512,7 @@ impl Worker {
             lookup,
             positions,
             graph,
+            pelagic: None,
             log: Vec::new(),
             last_publish: Instant::now(),
         }
@@ -765,7 +778,43 @@ impl Worker {
         }
     }
 
+    /// The pelagic rain's field of the planet (empty with the same rain everywhere), from the
+    /// run's own cache (see [`ReliefState::pelagic_rate`]); shared with the last snapshot while
+    /// neither the mesh nor the parameters that shape it changed.
+    ///
+    /// [`ReliefState::pelagic_rate`]: crate::systems::relief::ReliefState::pelagic_rate
+    fn pelagic_rate(&mut self) -> Arc<Vec<f32>> {
+        let params = self.sim.params();
+        let s = &params.sediment;
+        let key = (
+            self.mesh_generation,
+            params.planet.seed,
+            s.pelagic_variability.to_bits(),
+            s.pelagic_variability_km.to_bits(),
+            params.planet.radius_km.to_bits(),
+        );
+        if let Some((k, rate)) = &self.pelagic
+            && *k == key
+        {
+            return rate.clone();
+        }
+        let rate = Arc::new(
+            self.sim
+                .with_pelagic_rate(|_, rate| rate.to_vec())
+                .unwrap_or_default(),
+        );
+        self.pelagic = Some((key, rate.clone()));
+        rate
+    }
+
     fn snapshot(&mut self) -> Snapshot {
+        let phenomena = self.sim.phenomena();
+        let pelagic_rain_on = phenomena.iter().any(|p| p.name == "sediment" && p.enabled);
+        let pelagic_rate = if pelagic_rain_on {
+            self.pelagic_rate()
+        } else {
+            Arc::default()
+        };
         let crust = Arc::new(self.sim.resampled_crust());
         let radius_km = self.sim.params().planet.radius_km;
         let table = self.sim.plate_table();
@@ -862,12 +911,14 @@ impl Worker {
             positions: self.positions.clone(),
             graph: self.graph.clone(),
             rivers: Arc::default(),
+            pelagic_rate,
+            pelagic_rain_on,
             plates,
             fronts,
             terranes,
             set_timings_ms,
             step_ms: self.last_step_ms,
-            phenomena: self.sim.phenomena(),
+            phenomena,
             stats: self.sim.stats().clone(),
             params: self.sim.params().clone(),
             plugin_params: self.sim.plugin_params().iter().copied().collect(),

@@ -451,12 +451,9 @@ pub(crate) fn write_outputs(sim: &mut Simulation, out: &Path, width: u32) -> Res
         .get_resource::<tectonic_planets::plugins::Phenomena>()
         .is_some_and(|p| p.is_enabled("sediment"));
     if rains
-        && let Some(p) = sim
-            .with_pelagic_rate(|mesh, rate| {
-                tectonic_planets::io::maps::write_pelagic_rate(&raster, mesh, rate, out)
-            })
-            .transpose()?
-            .flatten()
+        && let Some(rate) = sim.pelagic_rate()
+        && let Some(p) =
+            tectonic_planets::io::maps::write_pelagic_rate(&raster, sim.mesh(), &rate, out)?
     {
         files.push(p);
     }

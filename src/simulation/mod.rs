@@ -411,18 +411,17 @@ impl Simulation {
     }
     /// The pelagic rain's multiplier at each sample of the mesh (`sediment.pelagic_variability`,
     /// see [`ReliefState::pelagic_rate`](crate::systems::relief::ReliefState::pelagic_rate)):
-    /// the field the run's rain uses, built there if no rain has fallen yet (a save just
-    /// loaded), handed to `f` with the mesh. Empty when the same rain falls everywhere; `None`
-    /// when the relief phenomena are not part of the run.
-    pub fn with_pelagic_rate<R>(&mut self, f: impl FnOnce(&SphereMesh, &[f32]) -> R) -> Option<R> {
+    /// the field the run's rain uses (shared, not copied), built there if no rain has fallen
+    /// yet (a save just loaded). Empty when the same rain falls everywhere; `None` when the
+    /// relief phenomena are not part of the run.
+    pub fn pelagic_rate(&mut self) -> Option<std::sync::Arc<Vec<f32>>> {
         let world = self.app.world_mut();
         if !world.contains_resource::<crate::systems::relief::ReliefState>() {
             return None;
         }
         Some(world.resource_scope(
             |world, mut state: Mut<crate::systems::relief::ReliefState>| {
-                let (mesh, params) = (world.resource::<SphereMesh>(), world.resource::<Params>());
-                f(mesh, state.pelagic_rate(mesh, params))
+                state.pelagic_rate(world.resource::<SphereMesh>(), world.resource::<Params>())
             },
         ))
     }

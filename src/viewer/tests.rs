@@ -1081,7 +1081,7 @@ fn the_pelagic_rain_layer_shows_the_rain_the_run_uses() {
     });
     h.step(2);
     let snap = h.app.snap.clone().unwrap();
-    let used = h.inspect(|sim| sim.with_pelagic_rate(|_, r| r.to_vec()).unwrap());
+    let used = h.inspect(|sim| sim.pelagic_rate().unwrap().to_vec());
     assert_eq!(used.len(), snap.positions.len(), "the rain varies");
     assert_eq!(
         *snap.pelagic_rate, used,

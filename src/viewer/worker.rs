@@ -474,15 +474,9 @@ struct Worker {
     lookup: Arc<PixelLookup>,
     positions: Arc<Vec<DVec3>>,
     graph: Arc<ReliefGraph>,
-    /// The last pelagic rain field published, and what it was built for (mesh generation,
-    /// seed, σ, wavelength, radius): rebuilt only when one of them changes.
-    pelagic: Option<(PelagicKey, Arc<Vec<f32>>)>,
     log: Vec<String>,
     last_publish: Instant,
 }
-
-/// What a published pelagic rain field was built for (see `Worker::pelagic`).
-type PelagicKey = (u64, u64, u64, u64, u64);
 
 impl Worker {
     fn new(
@@ -512,7 +506,6 @@ impl Worker {
             lookup,
             positions,
             graph,
-            pelagic: None,
             log: Vec::new(),
             last_publish: Instant::now(),
         }
@@ -778,40 +771,12 @@ impl Worker {
         }
     }
 
-    /// The pelagic rain's field of the planet (empty with the same rain everywhere), from the
-    /// run's own cache (see [`ReliefState::pelagic_rate`]); shared with the last snapshot while
-    /// neither the mesh nor the parameters that shape it changed.
-    ///
-    /// [`ReliefState::pelagic_rate`]: crate::systems::relief::ReliefState::pelagic_rate
-    fn pelagic_rate(&mut self) -> Arc<Vec<f32>> {
-        let params = self.sim.params();
-        let s = &params.sediment;
-        let key = (
-            self.mesh_generation,
-            params.planet.seed,
-            s.pelagic_variability.to_bits(),
-            s.pelagic_variability_km.to_bits(),
-            params.planet.radius_km.to_bits(),
-        );
-        if let Some((k, rate)) = &self.pelagic
-            && *k == key
-        {
-            return rate.clone();
-        }
-        let rate = Arc::new(
-            self.sim
-                .with_pelagic_rate(|_, rate| rate.to_vec())
-                .unwrap_or_default(),
-        );
-        self.pelagic = Some((key, rate.clone()));
-        rate
-    }
-
     fn snapshot(&mut self) -> Snapshot {
         let phenomena = self.sim.phenomena();
         let pelagic_rain_on = phenomena.iter().any(|p| p.name == "sediment" && p.enabled);
+        // The run's own field, shared (see `Simulation::pelagic_rate`).
         let pelagic_rate = if pelagic_rain_on {
-            self.pelagic_rate()
+            self.sim.pelagic_rate().unwrap_or_default()
         } else {
             Arc::default()
         };

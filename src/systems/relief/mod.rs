@@ -440,7 +440,8 @@ pub struct ReliefState {
 #[derive(Default)]
 struct PelagicField {
     key: Option<(usize, u64, u64, u64, u64)>,
-    rate: Vec<f32>,
+    /// Shared with the maps and the viewer, which take it as it is.
+    rate: std::sync::Arc<Vec<f32>>,
 }
 
 impl PelagicField {
@@ -458,13 +459,13 @@ impl PelagicField {
             r.to_bits(),
         );
         if self.key != Some(key) {
-            self.rate = pelagic_rate_field(
+            self.rate = std::sync::Arc::new(pelagic_rate_field(
                 &mesh.positions,
                 &mesh.area_km2,
                 crate::random::hash3(params.planet.seed, crate::random::stream::PELAGIC, 0),
                 s.pelagic_variability,
                 s.pelagic_variability_km / r,
-            );
+            ));
             self.key = Some(key);
         }
         &self.rate
@@ -514,8 +515,9 @@ impl ReliefState {
     /// The pelagic rain's multiplier at each sample of `mesh` under `params` (see
     /// [`pelagic_rate_field`]): the field the rain uses, built here if no rain has yet (a planet
     /// just loaded); empty with the same rain everywhere.
-    pub fn pelagic_rate(&mut self, mesh: &SphereMesh, params: &Params) -> &[f32] {
-        self.pelagic.ensure(mesh, params)
+    pub fn pelagic_rate(&mut self, mesh: &SphereMesh, params: &Params) -> std::sync::Arc<Vec<f32>> {
+        self.pelagic.ensure(mesh, params);
+        self.pelagic.rate.clone()
     }
 
     /// Frees the relief passes' work areas (rebuilt at their next use): see

@@ -446,12 +446,7 @@ pub(crate) fn write_outputs(sim: &mut Simulation, out: &Path, width: u32) -> Res
     files.extend(write_rivers(&raster, sim.mesh(), &rivers, out, radius_km)?);
     // With a pelagic rain that varies from place to place (and the sediment that lays it on),
     // its map.
-    let rains = sim
-        .world()
-        .get_resource::<tectonic_planets::plugins::Phenomena>()
-        .is_some_and(|p| p.is_enabled("sediment"));
-    if rains
-        && let Some(rate) = sim.pelagic_rate()
+    if let Some(rate) = sim.pelagic_rate()
         && let Some(p) =
             tectonic_planets::io::maps::write_pelagic_rate(&raster, sim.mesh(), &rate, out)?
     {

@@ -412,11 +412,15 @@ impl Simulation {
     /// The pelagic rain's multiplier at each sample of the mesh (`sediment.pelagic_variability`,
     /// see [`ReliefState::pelagic_rate`](crate::systems::relief::ReliefState::pelagic_rate)):
     /// the field the run's rain uses (shared, not copied), built there if no rain has fallen
-    /// yet (a save just loaded). Empty when the same rain falls everywhere; `None` when the
-    /// relief phenomena are not part of the run.
+    /// yet (a save just loaded). Empty when the same rain falls everywhere; `None` when no
+    /// pelagic rain settles at all (the phenomenon `sediment`, which lays it, is off, or the
+    /// relief phenomena are not part of the run).
     pub fn pelagic_rate(&mut self) -> Option<std::sync::Arc<Vec<f32>>> {
         let world = self.app.world_mut();
-        if !world.contains_resource::<crate::systems::relief::ReliefState>() {
+        let rains = world
+            .get_resource::<Phenomena>()
+            .is_some_and(|p| p.is_enabled(crate::plugins::sediment::SEDIMENT.name()));
+        if !rains || !world.contains_resource::<crate::systems::relief::ReliefState>() {
             return None;
         }
         Some(world.resource_scope(

@@ -308,17 +308,17 @@ fn rain_image(s: &Snapshot) -> ColorImage {
 /// mean's colour; with the sediment off (no rain settles) the sea is dark.
 fn pelagic_rain_image(s: &Snapshot) -> ColorImage {
     let lk = &s.lookup;
-    let rate = &s.pelagic_rate[..];
-    let varies = rate.len() == s.positions.len();
+    let rate = s.pelagic_rate.as_deref();
+    let n = s.positions.len();
     per_pixel(s, |i| {
         let [r, g, b] = if lk.lerp(&s.crust.elevation_km, i) > 0.0 {
             crate::io::maps::PELAGIC_LAND
-        } else if !s.pelagic_rain_on {
-            return BASIN_SEA;
-        } else if varies {
-            crate::io::maps::pelagic_colour(lk.lerp(rate, i) as f64)
         } else {
-            crate::io::maps::pelagic_colour(1.0)
+            match rate {
+                None => return BASIN_SEA,
+                Some(f) if f.len() == n => crate::io::maps::pelagic_colour(lk.lerp(f, i) as f64),
+                Some(_) => crate::io::maps::pelagic_colour(1.0),
+            }
         };
         Color32::from_rgb(r, g, b)
     })

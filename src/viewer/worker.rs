@@ -253,11 +253,10 @@ pub struct Snapshot {
     /// The drainage network of `crust`, made on first use ([`Snapshot::rivers`]).
     pub rivers: Arc<OnceLock<RiverNetwork>>,
     /// The pelagic rain's multiplier at each sample (`sediment.pelagic_variability`: the field
-    /// the run's rain uses, fixed in the mantle frame, so it lines up with `crust`); empty when
-    /// the same rain falls everywhere or none falls.
-    pub pelagic_rate: Arc<Vec<f32>>,
-    /// Whether pelagic rain settles at all (the phenomenon `sediment`, which lays it, is on).
-    pub pelagic_rain_on: bool,
+    /// the run's rain uses, fixed in the mantle frame, so it lines up with `crust`; see
+    /// [`Simulation::pelagic_rate`]); empty when the same rain falls everywhere, `None` when
+    /// none settles (the sediment off).
+    pub pelagic_rate: Option<Arc<Vec<f32>>>,
     /// Every plate, by id.
     pub plates: Vec<PlateRow>,
     /// Subduction fronts.
@@ -772,14 +771,7 @@ impl Worker {
     }
 
     fn snapshot(&mut self) -> Snapshot {
-        let phenomena = self.sim.phenomena();
-        let pelagic_rain_on = phenomena.iter().any(|p| p.name == "sediment" && p.enabled);
-        // The run's own field, shared (see `Simulation::pelagic_rate`).
-        let pelagic_rate = if pelagic_rain_on {
-            self.sim.pelagic_rate().unwrap_or_default()
-        } else {
-            Arc::default()
-        };
+        let pelagic_rate = self.sim.pelagic_rate();
         let crust = Arc::new(self.sim.resampled_crust());
         let radius_km = self.sim.params().planet.radius_km;
         let table = self.sim.plate_table();
@@ -877,13 +869,12 @@ impl Worker {
             graph: self.graph.clone(),
             rivers: Arc::default(),
             pelagic_rate,
-            pelagic_rain_on,
             plates,
             fronts,
             terranes,
             set_timings_ms,
             step_ms: self.last_step_ms,
-            phenomena,
+            phenomena: self.sim.phenomena(),
             stats: self.sim.stats().clone(),
             params: self.sim.params().clone(),
             plugin_params: self.sim.plugin_params().iter().copied().collect(),

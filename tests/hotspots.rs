@@ -169,6 +169,78 @@ fn hotspot_under_a_moving_oceanic_plate_builds_an_age_progressive_chain() {
     );
 }
 
+/// A slow plate stays under its hotspot for several steps, and each new edifice of the chain is
+/// founded on the flank of the last one: the summits must still stand no more than
+/// `max_height_km` above the floor the chain is built on (they used to pile up to about 1.5
+/// times that, 10–13 km above sea level on a shallow floor).
+#[test]
+fn a_chain_on_a_slow_plate_keeps_its_summits_under_the_cap() {
+    let run = |on: bool| {
+        let mut p = common::params(40_000, 5);
+        p.init.continental_fraction = 0.0;
+        p.init.plates = 2;
+        let mut sim = Simulation::new(p).unwrap();
+        let n = sim.mesh().len();
+        let radius_km = sim.params().planet.radius_km;
+        // 20 mm/yr at the equator: 40 km a step, so the hotspot founds a new edifice every
+        // three or four steps, 125 km (r/2) from the last, on its flank.
+        let omega = 20.0 / radius_km;
+        sim.reassign_plates(
+            vec![0; n],
+            &[(
+                0,
+                PlateMotion {
+                    euler_pole: DVec3::Z,
+                    angular_speed_rad_per_my: omega,
+                },
+            )],
+        )
+        .unwrap();
+        sim.world_mut().spawn(Hotspot {
+            index: 0,
+            position: DVec3::X,
+        });
+        {
+            let mut pp = sim.plugin_params_mut();
+            pp.set("plugins.hotspots.count", ParamValue::Int(0))
+                .unwrap();
+            pp.set("plugins.hotspots.radius_km", ParamValue::Float(250.0))
+                .unwrap();
+        }
+        sim.set_enabled("hotspots", on).unwrap();
+        common::paper_relief(&mut sim);
+        sim.run_steps(30).unwrap();
+        let list = edifices(&mut sim);
+        (sim.resampled_crust(), list)
+    };
+    let (off, _) = run(false);
+    let (on, list) = run(true);
+    assert!(list.len() >= 6, "{} edifices", list.len());
+    let cap = 8.0; // `plugins.hotspots.max_height_km`, the default
+    // What the hotspot raised: the chain stands high above the floor beside it.
+    let rise = (0..on.len())
+        .map(|i| on.elevation_km[i] - off.elevation_km[i])
+        .fold(f32::MIN, f32::max);
+    assert!(
+        rise > 0.5 * cap as f32,
+        "the chain stands only {rise} km above the floor"
+    );
+    // The first edifice was founded on the bare floor under the hotspot; no summit of the
+    // chain stands more than the cap above it (before the fix: 12 km).
+    let floor = list
+        .iter()
+        .map(|(e, _)| e.base_km)
+        .fold(f64::INFINITY, f64::min);
+    let (top, at) = (0..on.len())
+        .map(|i| (on.elevation_km[i], i))
+        .fold((f32::MIN, 0), |a, b| if b.0 > a.0 { b } else { a });
+    assert!(
+        f64::from(top) <= floor + cap + 0.01,
+        "sample {at} stands at {top} km, {} km above the chain's floor ({floor} km; cap {cap} km)",
+        f64::from(top) - floor
+    );
+}
+
 fn small(samples: u64) -> Params {
     let mut p = common::params(samples, 3);
     p.init.plates = 12;

@@ -13,8 +13,11 @@
 //! - That plate's samples within `radius_km` of the hotspot rise by
 //!   `uplift_mm_per_yr · δt · (1 − (d/r)²)²` (great-circle distance d, crust thickens by as
 //!   much), until the edifice is `max_height_km` high (a quarter of it on continental ground,
-//!   where hotspots make plateaus rather than shields). The uplift goes to the nearest edifice
-//!   of that plate within r/2 of the hotspot, or to a new one.
+//!   where hotspots make plateaus rather than shields) and the surface at the hotspot stands
+//!   no more than that above the floor the edifice stands on. The uplift goes to the nearest
+//!   edifice of that plate within r/2 of the hotspot, or to a new one; a new one founded on
+//!   the flanks of others stands on their lowest floor, so a chain on a slow plate does not
+//!   pile each edifice on the last.
 //! - Edifices not over their hotspot subside: an edifice of height h loses
 //!   `h · (1 − exp(−δt/τ))` (τ = `subsidence_time_my`, thermal subsidence of the lithosphere)
 //!   over the same footprint, never below the floor it was built on nor the abyssal plain; the
@@ -426,16 +429,38 @@ fn build_and_subside(
             .filter(|&(_, a)| a <= 0.5 * r_rad)
             .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
         let built = near.map_or(0.0, |(k, _)| list[k].1.built_km);
+        // The floor the edifice stands on: its own, or for a new one the lowest floor of the
+        // edifices of this plate whose footprint it is founded on (the flank of the last one
+        // of its chain), so a chain on a slow plate does not stack each new edifice on the
+        // last one's flank (summits 12 km above the floor where the cap says 8).
+        let base_km = match near {
+            Some((k, _)) => list[k].1.base_km,
+            None => list
+                .iter()
+                .filter(|(_, d)| d.plate.0 == plate && angle_between(d.pos_in_plate, q) < r_rad)
+                .map(|(_, d)| d.base_km)
+                .fold(f64::from(z_under), f64::min),
+        };
         let cap_km = if continental {
             CONTINENTAL_HEIGHT_FRACTION * s.max_height_km
         } else {
             s.max_height_km
         };
-        let dz_km = (s.uplift_mm_per_yr * dt).min(cap_km - built).max(0.0);
+        // The edifice's own budget, and the summit at most the cap above its floor.
+        let dz_km = (s.uplift_mm_per_yr * dt)
+            .min(cap_km - built)
+            .min(base_km + cap_km - f64::from(z_under))
+            .max(0.0);
         footprint(&mesh, crust, plate, q, r_rad, &mut marks, &mut samples);
+        // Nowhere above the cap over the floor: the flank of an older edifice of the chain
+        // can stand higher than the surface at the hotspot.
+        let ceiling = (base_km + cap_km) as f32;
         for &(i, d) in &samples {
-            let dz = (dz_km * profile(d / r_rad)) as f32;
-            crust.elevation_km[i] += dz;
+            let z = crust.elevation_km[i];
+            let dz = ((dz_km * profile(d / r_rad)) as f32)
+                .min(ceiling - z)
+                .max(0.0);
+            crust.elevation_km[i] = z + dz;
             crust.thickness_km[i] += thickening(crust, i, dz);
         }
         match near {
@@ -455,7 +480,7 @@ fn build_and_subside(
                     height_km: dz_km,
                     built_km: dz_km,
                     age_my: 0.0,
-                    base_km: f64::from(z_under),
+                    base_km,
                 });
                 state.next_serial += 1;
             }

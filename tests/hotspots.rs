@@ -226,7 +226,7 @@ fn a_chain_on_a_slow_plate_keeps_its_summits_under_the_cap() {
         "the chain stands only {rise} km above the floor"
     );
     // The first edifice was founded on the bare floor under the hotspot; no summit of the
-    // chain stands more than the cap above it (before the fix: 12 km).
+    // chain stands more than the cap above it (before the fix: 9.8 km).
     let floor = list
         .iter()
         .map(|(e, _)| e.base_km)

@@ -13,8 +13,8 @@
 //! - That plate's samples within `radius_km` of the hotspot rise by
 //!   `uplift_mm_per_yr · δt · (1 − (d/r)²)²` (great-circle distance d, crust thickens by as
 //!   much), until the edifice is `max_height_km` high (a quarter of it on continental ground,
-//!   where hotspots make plateaus rather than shields) and the surface at the hotspot stands
-//!   no more than that above the floor the edifice stands on. The uplift goes to the nearest
+//!   where hotspots make plateaus rather than shields), and it raises no sample of its
+//!   footprint more than that above the floor the edifice stands on. The uplift goes to the nearest
 //!   edifice of that plate within r/2 of the hotspot, or to a new one; a new one founded on
 //!   the flanks of others stands on their lowest floor, so a chain on a slow plate does not
 //!   pile each edifice on the last.

@@ -40,18 +40,18 @@ fn elevation_at(mesh: &SphereMesh, crust: &Crust, p: DVec3) -> f32 {
     crust.elevation_km[s as usize]
 }
 
-#[test]
-fn hotspot_under_a_moving_oceanic_plate_builds_an_age_progressive_chain() {
+/// One oceanic plate covering the sphere (40,000 samples), turning eastward about the z axis at
+/// `speed_km_per_my` at the equator, over one hotspot on the equator at longitude 0 (+x) of
+/// radius `hotspot_radius_km`, switched on or off, with the paper's relief: with the relief
+/// phenomena, rivers wear young islands down within a few steps at this resolution (stream
+/// power at the scale of a 110 km sample), which is not what these tests are about.
+fn plate_over_a_hotspot(speed_km_per_my: f64, hotspot_radius_km: f64, on: bool) -> Simulation {
     let mut p = common::params(40_000, 5);
     p.init.continental_fraction = 0.0;
     p.init.plates = 2;
     let mut sim = Simulation::new(p).unwrap();
     let n = sim.mesh().len();
-    let radius_km = sim.params().planet.radius_km;
-    // One oceanic plate covering the sphere, turning eastward about the z axis at 100 mm/yr at
-    // the equator, over one hotspot on the equator at longitude 0.
-    let speed_km_per_my = 100.0;
-    let omega = speed_km_per_my / radius_km;
+    let omega = speed_km_per_my / sim.params().planet.radius_km;
     sim.reassign_plates(
         vec![0; n],
         &[(
@@ -63,12 +63,10 @@ fn hotspot_under_a_moving_oceanic_plate_builds_an_age_progressive_chain() {
         )],
     )
     .unwrap();
-    let spot = DVec3::X;
     sim.world_mut().spawn(Hotspot {
         index: 0,
-        position: spot,
+        position: DVec3::X,
     });
-    let hotspot_radius_km = 250.0;
     {
         let mut pp = sim.plugin_params_mut();
         pp.set("plugins.hotspots.count", ParamValue::Int(0))
@@ -79,11 +77,19 @@ fn hotspot_under_a_moving_oceanic_plate_builds_an_age_progressive_chain() {
         )
         .unwrap();
     }
-    sim.set_enabled("hotspots", true).unwrap();
-    // The chain as the paper's relief makes it: with the relief phenomena, rivers wear young
-    // islands down within a few steps at this resolution (stream power at the scale of a
-    // 110 km sample), which is not what this test is about.
+    sim.set_enabled("hotspots", on).unwrap();
     common::paper_relief(&mut sim);
+    sim
+}
+
+#[test]
+fn hotspot_under_a_moving_oceanic_plate_builds_an_age_progressive_chain() {
+    // 100 mm/yr at the equator.
+    let speed_km_per_my = 100.0;
+    let hotspot_radius_km = 250.0;
+    let mut sim = plate_over_a_hotspot(speed_km_per_my, hotspot_radius_km, true);
+    let radius_km = sim.params().planet.radius_km;
+    let omega = speed_km_per_my / radius_km;
     let before = sim.resampled_crust();
     let steps = 40;
     sim.run_steps(steps).unwrap();
@@ -175,40 +181,10 @@ fn hotspot_under_a_moving_oceanic_plate_builds_an_age_progressive_chain() {
 /// times that, 10–13 km above sea level on a shallow floor).
 #[test]
 fn a_chain_on_a_slow_plate_keeps_its_summits_under_the_cap() {
+    // 20 mm/yr at the equator: 40 km a step, so the hotspot founds a new edifice every three
+    // or four steps, 125 km (r/2) from the last, on its flank.
     let run = |on: bool| {
-        let mut p = common::params(40_000, 5);
-        p.init.continental_fraction = 0.0;
-        p.init.plates = 2;
-        let mut sim = Simulation::new(p).unwrap();
-        let n = sim.mesh().len();
-        let radius_km = sim.params().planet.radius_km;
-        // 20 mm/yr at the equator: 40 km a step, so the hotspot founds a new edifice every
-        // three or four steps, 125 km (r/2) from the last, on its flank.
-        let omega = 20.0 / radius_km;
-        sim.reassign_plates(
-            vec![0; n],
-            &[(
-                0,
-                PlateMotion {
-                    euler_pole: DVec3::Z,
-                    angular_speed_rad_per_my: omega,
-                },
-            )],
-        )
-        .unwrap();
-        sim.world_mut().spawn(Hotspot {
-            index: 0,
-            position: DVec3::X,
-        });
-        {
-            let mut pp = sim.plugin_params_mut();
-            pp.set("plugins.hotspots.count", ParamValue::Int(0))
-                .unwrap();
-            pp.set("plugins.hotspots.radius_km", ParamValue::Float(250.0))
-                .unwrap();
-        }
-        sim.set_enabled("hotspots", on).unwrap();
-        common::paper_relief(&mut sim);
+        let mut sim = plate_over_a_hotspot(20.0, 250.0, on);
         sim.run_steps(30).unwrap();
         let list = edifices(&mut sim);
         (sim.resampled_crust(), list)

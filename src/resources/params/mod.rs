@@ -341,6 +341,7 @@ define_params! {
         pelagic_clay_rate_m_per_my: f64 = 1.0, 0.0..=1000.0, "m/My", "Pelagic clay (dust, the shells' insoluble remains) laid below the carbonate compensation depth (`pelagic_ccd_m`; abyssal red clay builds at 0.5–2 m/My).";
         pelagic_variability: f64 = 0.0, 0.0..=3.0, "", "How much the pelagic rain varies from place to place (0, the default: the same everywhere): the rate is multiplied by exp(σ·F), F a smooth noise field of unit spread fixed in the mantle frame, scaled so the rain's mean over the globe stays `pelagic_rate_m_per_my`. Earth's rates range tenfold, from red clay under the gyres to ooze under upwelling (σ ≈ 0.7 spans ×0.3 to ×3.2 between the 5th and 95th percentiles). It spreads the floor's depths (docs/relief.md, 2026-12-07).";
         pelagic_variability_km: f64 = 2000.0, 100.0..=40000.0, "km", "Wavelength of the noise field of `pelagic_variability` (its first octave, of three).";
+        pelagic_variability_from_age_my: f64 = 0.0, 0.0..=10000.0, "My", "Age of the floor from which the pelagic rain varies (`pelagic_variability`); younger floor gets the mean rate everywhere. Young floor stands shallow, above the carbonate compensation depth, where shells settle at much the same rate everywhere; older floor sinks below it, where what settles depends on the plankton and dust overhead (siliceous ooze under upwelling, red clay under the gyres). 0: the rain varies at every age. `pelagic_rate.png` and the viewer's pelagic rain layer draw the field itself, the rain on floor of that age or older.";
     }
     /// Plate rifting.
     [rifting] Rifting {
@@ -987,7 +988,7 @@ mod tests {
     #[test]
     fn schema_is_consistent() {
         let schema = Params::schema();
-        assert_eq!(schema.len(), 116);
+        assert_eq!(schema.len(), 117);
         assert_eq!(schema.len(), BOUNDS.len());
         let mut seen = HashSet::new();
         for (spec, (lo, hi)) in schema.iter().zip(BOUNDS) {

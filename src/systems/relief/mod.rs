@@ -1353,6 +1353,9 @@ pub struct PelagicRain {
     pub ccd_km: f64,
     /// Thickness laid per step below the CCD, km.
     pub clay_km: f64,
+    /// Youngest floor the rate field of [`Self::lay`] applies to, My (younger floor gets the
+    /// mean rain).
+    pub varies_from_age_my: f32,
 }
 
 impl PelagicRain {
@@ -1369,6 +1372,7 @@ impl PelagicRain {
             min_depth_km: s.pelagic_min_depth_m * 1e-3,
             ccd_km: s.pelagic_ccd_m * 1e-3,
             clay_km: s.pelagic_clay_rate_m_per_my * 1e-3 * dt,
+            varies_from_age_my: s.pelagic_variability_from_age_my as f32,
         }
     }
 
@@ -1383,8 +1387,9 @@ impl PelagicRain {
     }
 
     /// Adds the layer to `thickness_km` where it settles (see [`PelagicRain`]), times `rate[i]`
-    /// where `rate` is not empty (a rain that varies from place to place, see
-    /// [`pelagic_rate_field`]), and returns its volume, km³. One pass: each fixed chunk adds its
+    /// where `rate` is not empty and the floor is at least [`Self::varies_from_age_my`] old (a
+    /// rain that varies from place to place, see [`pelagic_rate_field`]), and returns its
+    /// volume, km³. One pass: each fixed chunk adds its
     /// rain and sums its volume, the chunks are summed in order (the same sum whatever the
     /// thread count).
     #[allow(clippy::too_many_arguments)]
@@ -1418,7 +1423,9 @@ impl PelagicRain {
                     let i = c * CH + k;
                     if settles(i) {
                         let mut layer = self.layer_at(-f64::from(elevation_km[i]));
-                        if let Some(&r) = rate.get(i) {
+                        if let Some(&r) = rate.get(i)
+                            && age_my[i] >= self.varies_from_age_my
+                        {
                             layer *= f64::from(r);
                         }
                         *t += layer as f32;
@@ -2209,6 +2216,7 @@ mod tests {
             min_depth_km: 0.05,
             ccd_km: 0.0,
             clay_km: 0.0,
+            varies_from_age_my: 0.0,
         };
         // deep and young; shallow (20 m); old; continental crust; a lake (not the sea); deep again
         let elevation = [-4.0f32, -0.02, -5.0, -0.5, -0.3, -0.051];
@@ -2244,6 +2252,7 @@ mod tests {
             min_depth_km: 0.05,
             ccd_km: 4.5,
             clay_km: 0.002,
+            varies_from_age_my: 0.0,
         };
         // above the lysocline (3.5 km), halfway to the CCD, at the CCD, below it
         let elevation = [-3.0f32, -4.0, -4.5, -6.0];
@@ -2339,8 +2348,9 @@ mod tests {
     }
 
     /// With a rate field the layer laid on each sample is the layer times its rate, and the
-    /// volume returned is what was laid; an empty field lays the same rain everywhere. Seen to
-    /// fail with the rate ignored.
+    /// volume returned is what was laid; an empty field lays the same rain everywhere; with
+    /// `varies_from_age_my`, floor younger than that gets the mean layer. Seen to fail with the
+    /// rate ignored, and with the age threshold ignored (sample 0 of 59 My then gets 0.056).
     #[test]
     fn pelagic_rain_follows_the_rate_field() {
         let rain = PelagicRain {
@@ -2349,6 +2359,7 @@ mod tests {
             min_depth_km: 0.05,
             ccd_km: 0.0,
             clay_km: 0.0,
+            varies_from_age_my: 0.0,
         };
         let elevation = [-4.0f32, -4.0, -4.0, -0.02];
         let age = [50.0f32; 4];
@@ -2371,6 +2382,26 @@ mod tests {
         let mut u = [7.0f32; 4];
         rain.lay(&mut u, &elevation, &age, &oceanic, &ocean, &area, &[]);
         assert_eq!(u[..3], [7.028f32, 7.028, 7.028]);
+        // From an age on: floor younger than that gets the mean layer, older floor its rate.
+        let from_60 = PelagicRain {
+            varies_from_age_my: 60.0,
+            ..rain
+        };
+        let age = [59.0f32, 60.0, 120.0, 30.0];
+        let elevation = [-4.0f32; 4];
+        let mut w = [7.0f32; 4];
+        let v = from_60.lay(&mut w, &elevation, &age, &oceanic, &ocean, &area, &rate);
+        let laid: Vec<f64> = w.iter().map(|&x| f64::from(x) - 7.0).collect();
+        for (k, want) in [0.028, 0.014, 0.028, 0.028].into_iter().enumerate() {
+            assert!(
+                (laid[k] - want).abs() < 1e-6,
+                "from 60 My, sample {k} of {} My: {} against {want}",
+                age[k],
+                laid[k]
+            );
+        }
+        let want_v = 0.028 * 100.0 + 0.014 * 200.0 + 0.028 * 50.0 + 0.028 * 100.0;
+        assert!((v - want_v).abs() < 1e-9, "volume {v}");
     }
 
     /// The trench of a planet with several subducting plates is the same bits computed on one

@@ -1389,9 +1389,8 @@ impl PelagicRain {
     /// Adds the layer to `thickness_km` where it settles (see [`PelagicRain`]), times `rate[i]`
     /// where `rate` is not empty and the floor is at least [`Self::varies_from_age_my`] old (a
     /// rain that varies from place to place, see [`pelagic_rate_field`]), and returns its
-    /// volume, km³. One pass: each fixed chunk adds its
-    /// rain and sums its volume, the chunks are summed in order (the same sum whatever the
-    /// thread count).
+    /// volume, km³. One pass: each fixed chunk adds its rain and sums its volume, the chunks are
+    /// summed in order (the same sum whatever the thread count).
     #[allow(clippy::too_many_arguments)]
     pub fn lay(
         &self,
@@ -2205,19 +2204,23 @@ mod tests {
         SphereMesh::fibonacci(20_000, 0.5, 3, 6370.0).expect("mesh")
     }
 
+    /// 28 m a step on floor younger than 300 My and deeper than 50 m, no CCD, the same rate at
+    /// every age: the pelagic rain of the tests below, each changing what it tests.
+    const TEST_RAIN: PelagicRain = PelagicRain {
+        layer_km: 0.028,
+        max_age_my: 300.0,
+        min_depth_km: 0.05,
+        ccd_km: 0.0,
+        clay_km: 0.0,
+        varies_from_age_my: 0.0,
+    };
+
     /// Pelagic rain settles on oceanic crust at sea, young enough, and below the wave base only:
     /// five samples, each failing one condition but the first and the last. Seen to fail with
     /// the depth condition left out (the shallow sample got its layer).
     #[test]
     fn pelagic_rain_settles_below_the_wave_base_only() {
-        let rain = PelagicRain {
-            layer_km: 0.028,
-            max_age_my: 300.0,
-            min_depth_km: 0.05,
-            ccd_km: 0.0,
-            clay_km: 0.0,
-            varies_from_age_my: 0.0,
-        };
+        let rain = TEST_RAIN;
         // deep and young; shallow (20 m); old; continental crust; a lake (not the sea); deep again
         let elevation = [-4.0f32, -0.02, -5.0, -0.5, -0.3, -0.051];
         let age = [50.0f32, 50.0, 400.0, 50.0, 50.0, 10.0];
@@ -2247,12 +2250,9 @@ mod tests {
     #[test]
     fn pelagic_rain_dissolves_below_the_lysocline() {
         let rain = PelagicRain {
-            layer_km: 0.028,
-            max_age_my: 300.0,
-            min_depth_km: 0.05,
             ccd_km: 4.5,
             clay_km: 0.002,
-            varies_from_age_my: 0.0,
+            ..TEST_RAIN
         };
         // above the lysocline (3.5 km), halfway to the CCD, at the CCD, below it
         let elevation = [-3.0f32, -4.0, -4.5, -6.0];
@@ -2353,14 +2353,7 @@ mod tests {
     /// rate ignored, and with the age threshold ignored (sample 0 of 59 My then gets 0.056).
     #[test]
     fn pelagic_rain_follows_the_rate_field() {
-        let rain = PelagicRain {
-            layer_km: 0.028,
-            max_age_my: 300.0,
-            min_depth_km: 0.05,
-            ccd_km: 0.0,
-            clay_km: 0.0,
-            varies_from_age_my: 0.0,
-        };
+        let rain = TEST_RAIN;
         let elevation = [-4.0f32, -4.0, -4.0, -0.02];
         let age = [50.0f32; 4];
         let oceanic = [true; 4];

@@ -2353,48 +2353,45 @@ mod tests {
     /// rate ignored, and with the age threshold ignored (sample 0 of 59 My then gets 0.056).
     #[test]
     fn pelagic_rain_follows_the_rate_field() {
-        let rain = TEST_RAIN;
-        let elevation = [-4.0f32, -4.0, -4.0, -0.02];
-        let age = [50.0f32; 4];
         let oceanic = [true; 4];
         let ocean = [true; 4];
         let area = [100.0, 200.0, 50.0, 100.0];
         let rate = [2.0f32, 0.5, 1.0, 3.0];
-        let mut t = [7.0f32; 4];
-        let v = rain.lay(&mut t, &elevation, &age, &oceanic, &ocean, &area, &rate);
-        let laid: Vec<f64> = t.iter().map(|&x| f64::from(x) - 7.0).collect();
-        for (k, want) in [0.056, 0.014, 0.028, 0.0].into_iter().enumerate() {
-            assert!(
-                (laid[k] - want).abs() < 1e-6,
-                "sample {k}: {} against {want}",
-                laid[k]
-            );
-        }
-        let want_v = 0.056 * 100.0 + 0.014 * 200.0 + 0.028 * 50.0;
-        assert!((v - want_v).abs() < 1e-9, "volume {v}");
+        // Lays `rain` on four samples 7 km thick and checks the layer on each and the volume
+        // returned (the layers times the areas).
+        let check = |rain: &PelagicRain, elevation: [f32; 4], age: [f32; 4], want: [f64; 4]| {
+            let mut t = [7.0f32; 4];
+            let v = rain.lay(&mut t, &elevation, &age, &oceanic, &ocean, &area, &rate);
+            for k in 0..4 {
+                let laid = f64::from(t[k]) - 7.0;
+                assert!(
+                    (laid - want[k]).abs() < 1e-6,
+                    "from {} My, sample {k} of {} My: {laid} against {}",
+                    rain.varies_from_age_my,
+                    age[k],
+                    want[k]
+                );
+            }
+            let want_v: f64 = (0..4).map(|k| want[k] * area[k]).sum();
+            assert!((v - want_v).abs() < 1e-9, "volume {v} against {want_v}");
+        };
+        let rain = TEST_RAIN;
+        let elevation = [-4.0f32, -4.0, -4.0, -0.02];
+        check(&rain, elevation, [50.0; 4], [0.056, 0.014, 0.028, 0.0]);
         let mut u = [7.0f32; 4];
-        rain.lay(&mut u, &elevation, &age, &oceanic, &ocean, &area, &[]);
+        rain.lay(&mut u, &elevation, &[50.0; 4], &oceanic, &ocean, &area, &[]);
         assert_eq!(u[..3], [7.028f32, 7.028, 7.028]);
         // From an age on: floor younger than that gets the mean layer, older floor its rate.
         let from_60 = PelagicRain {
             varies_from_age_my: 60.0,
             ..rain
         };
-        let age = [59.0f32, 60.0, 120.0, 30.0];
-        let elevation = [-4.0f32; 4];
-        let mut w = [7.0f32; 4];
-        let v = from_60.lay(&mut w, &elevation, &age, &oceanic, &ocean, &area, &rate);
-        let laid: Vec<f64> = w.iter().map(|&x| f64::from(x) - 7.0).collect();
-        for (k, want) in [0.028, 0.014, 0.028, 0.028].into_iter().enumerate() {
-            assert!(
-                (laid[k] - want).abs() < 1e-6,
-                "from 60 My, sample {k} of {} My: {} against {want}",
-                age[k],
-                laid[k]
-            );
-        }
-        let want_v = 0.028 * 100.0 + 0.014 * 200.0 + 0.028 * 50.0 + 0.028 * 100.0;
-        assert!((v - want_v).abs() < 1e-9, "volume {v}");
+        check(
+            &from_60,
+            [-4.0; 4],
+            [59.0, 60.0, 120.0, 30.0],
+            [0.028, 0.014, 0.028, 0.028],
+        );
     }
 
     /// The trench of a planet with several subducting plates is the same bits computed on one
